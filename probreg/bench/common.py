@@ -1,0 +1,80 @@
+"""Shared plumbing of the benchmarks: registry, Markdown writing, environment notes."""
+
+from __future__ import annotations
+
+import datetime as _dt
+import importlib
+import os
+import platform
+import shlex
+import sys
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+__all__ = ["BENCHMARKS", "BenchReport", "run_benchmark", "md_table", "find_shared_data"]
+
+#: name -> "module:function"; each function takes (args namespace) and returns a BenchReport.
+BENCHMARKS = {
+    "realism": "probreg.bench.realism:run",
+    "synth-speed": "probreg.bench.synth_speed:run",
+}
+
+
+@dataclass
+class BenchReport:
+    """A benchmark's result: a title, Markdown sections and headline numbers."""
+
+    name: str
+    title: str
+    sections: list = field(default_factory=list)
+    numbers: dict = field(default_factory=dict)
+
+    def add(self, text):
+        self.sections.append(text.rstrip() + "\n")
+
+    def to_markdown(self, command):
+        head = [f"# {self.title}", "",
+                f"Command: `{command}`  ",
+                f"Measured: {_dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')} on "
+                f"{platform.machine()} with {os.cpu_count()} cores, Python {platform.python_version()}, "
+                f"numpy {np.__version__}", ""]
+        return "\n".join(head) + "\n" + "\n".join(self.sections)
+
+
+def md_table(header, rows, floatfmt="{:.2f}"):
+    """A Markdown table; floats are formatted with ``floatfmt``."""
+    def fmt(v):
+        if isinstance(v, (float, np.floating)):
+            return "n/a" if not np.isfinite(v) else floatfmt.format(v)
+        return str(v)
+    lines = ["| " + " | ".join(header) + " |", "|" + "---|" * len(header)]
+    lines += ["| " + " | ".join(fmt(v) for v in r) + " |" for r in rows]
+    return "\n".join(lines) + "\n"
+
+
+def find_shared_data(explicit=None):
+    """Locate ``shared/data`` (benchmarks only; the package never needs it)."""
+    cands = [explicit] if explicit else []
+    cands += [os.environ.get("PROBREG_SHARED_DATA"), Path.cwd() / "../shared/data",
+              Path(__file__).resolve().parents[3] / "shared/data"]
+    for c in cands:
+        if c and Path(c).is_dir():
+            return Path(c).resolve()
+    return None
+
+
+def run_benchmark(name, args, reports_dir="reports"):
+    """Run a registered benchmark and write ``reports/bench_<name>.md``; returns the path."""
+    if name not in BENCHMARKS:
+        raise ValueError(f"unknown benchmark {name!r}; choose from {sorted(BENCHMARKS)}")
+    mod, fn = BENCHMARKS[name].split(":")
+    report = getattr(importlib.import_module(mod), fn)(args)
+    out = Path(reports_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    path = out / f"bench_{name}.md"
+    command = "probreg " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[0].endswith(
+        "probreg") else "probreg bench " + name
+    path.write_text(report.to_markdown(command), encoding="utf-8")
+    return path

@@ -1,0 +1,150 @@
+"""The ``probreg`` command line.
+
+Commands that external benchmarks call keep their names and flags:
+``probreg synth --out DIR [--preset NAME] [--seed N] [--frames N] [--no-images]``.
+"""
+
+from __future__ import annotations
+
+import argparse
+import sys
+from pathlib import Path
+
+__all__ = ["main", "build_parser"]
+
+
+class CliError(Exception):
+    """A user-facing error: printed without a traceback, exit code 2."""
+
+
+def _cmd_synth(args):
+    from .synth import PRESETS, SUITES, config_from_preset, synthesize, write_clip, write_suite
+
+    if args.list:
+        print("presets:", ", ".join(sorted(PRESETS)))
+        print("suites:", ", ".join(f"{k} ({len(v)} clips)" for k, v in sorted(SUITES.items())))
+        return 0
+    if args.out is None:
+        raise CliError("--out DIR is required")
+    if args.frames is not None and args.frames < 1:
+        raise CliError("--frames must be at least 1")
+    if args.suite:
+        paths = write_suite(args.suite, args.out, images=not args.no_images, n_frames=args.frames,
+                            jobs=args.jobs, overwrite=args.overwrite)
+        print(f"wrote {len(paths)} clips under {args.out}")
+        return 0
+    overrides = {}
+    if args.style:
+        overrides["style"] = args.style
+    if args.camera_height is not None or args.fov is not None or args.distance is not None:
+        from dataclasses import replace
+
+        base = config_from_preset(args.preset, args.seed).camera
+        cam_kw = {}
+        if args.camera_height is not None:
+            cam_kw["height_m"] = args.camera_height
+        if args.distance is not None:
+            cam_kw["distance_m"] = args.distance
+        if args.fov is not None:
+            if not 0 < args.fov < 180:
+                raise ValueError(f"field of view must lie in (0, 180) degrees, got {args.fov}")
+            cam_kw["fov_range_deg"] = (args.fov, args.fov)
+        overrides["camera"] = replace(base, **cam_kw)
+    cfg = config_from_preset(args.preset, args.seed, n_frames=args.frames, **overrides)
+    clip = synthesize(cfg, seed=args.seed, preset=args.preset)
+    path = write_clip(clip, args.out, images=not args.no_images, jobs=args.jobs, overwrite=args.overwrite)
+    print(f"wrote {cfg.n_frames} frames ({cfg.style}, camera {clip.cameras[0].C[2]:.1f} m high, "
+          f"FOV {clip.cameras[0].fov_deg:.1f} deg) to {path}")
+    return 0
+
+
+def _cmd_demo(args):
+    from .report import clip_report
+    from .synth import config_from_preset, synthesize, write_clip
+
+    out = Path(args.out)
+    out.mkdir(parents=True, exist_ok=True)
+    cfg = config_from_preset(args.preset, args.seed, n_frames=args.frames)
+    clip = synthesize(cfg, seed=args.seed, preset=args.preset)
+    clip_dir = write_clip(clip, out / "clip", images=True, jobs=args.jobs, overwrite=True)
+    report = clip_report(clip_dir, out / "report.html")
+    print(f"synthetic clip: {clip_dir}\nreport: {report}")
+    return 0
+
+
+def _cmd_bench(args):
+    from .bench import BENCHMARKS, run_benchmark
+
+    if args.list or not args.name:
+        print("benchmarks:", ", ".join(sorted(BENCHMARKS)), "(or 'all')")
+        return 0
+    names = sorted(BENCHMARKS) if args.name == "all" else [args.name]
+    for name in names:
+        if name not in BENCHMARKS:
+            raise CliError(f"unknown benchmark {name!r}; choose from {sorted(BENCHMARKS)} or 'all'")
+        path = run_benchmark(name, args, reports_dir=args.reports)
+        print(f"{name}: {path}")
+    return 0
+
+
+def build_parser():
+    p = argparse.ArgumentParser(prog="probreg", description=__doc__.split("\n")[0])
+    from . import __version__
+
+    p.add_argument("--version", action="version", version=f"probreg {__version__}")
+    sub = p.add_subparsers(dest="command", required=True)
+
+    s = sub.add_parser("synth", help="generate a synthetic broadcast clip (or a fixed suite) with ground truth")
+    s.add_argument("--out", type=Path, help="output clip folder (suite: parent folder)")
+    s.add_argument("--preset", default="default", help="generator preset (see --list)")
+    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--frames", type=int, default=None, help="number of frames (default 250)")
+    s.add_argument("--no-images", action="store_true", help="skip rendering frames (keypoints + ground truth only)")
+    s.add_argument("--suite", default=None, help="write a fixed clip suite, e.g. 'bench'")
+    s.add_argument("--style", default=None, help="override the running style")
+    s.add_argument("--camera-height", type=float, default=None, help="override camera height (m)")
+    s.add_argument("--distance", type=float, default=None, help="override camera distance across the track (m)")
+    s.add_argument("--fov", type=float, default=None, help="fix the horizontal field of view (deg)")
+    s.add_argument("--jobs", type=int, default=None, help="rendering processes (default: all cores)")
+    s.add_argument("--overwrite", action="store_true", help="replace a non-empty output folder")
+    s.add_argument("--list", action="store_true", help="list presets and suites")
+    s.set_defaults(func=_cmd_synth)
+
+    d = sub.add_parser("demo", help="the main job on a built-in default: synthetic clip -> pipeline -> report")
+    d.add_argument("--out", type=Path, default=Path("demo_out"))
+    d.add_argument("--preset", default="default")
+    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--frames", type=int, default=250)
+    d.add_argument("--jobs", type=int, default=None)
+    d.set_defaults(func=_cmd_demo)
+
+    b = sub.add_parser("bench", help="run a benchmark and write reports/bench_<name>.md")
+    b.add_argument("name", nargs="?", help="benchmark name or 'all'")
+    b.add_argument("--list", action="store_true")
+    b.add_argument("--reports", type=Path, default=Path("reports"), help="where to write the Markdown")
+    b.add_argument("--shared", type=Path, default=None, help="path to shared/data (default: ../shared/data)")
+    b.add_argument("--repeats", type=int, default=None)
+    b.add_argument("--jobs", type=int, default=None)
+    b.add_argument("--suite-dir", type=Path, default=None, help="reuse an existing generated suite")
+    b.set_defaults(func=_cmd_bench)
+    return p
+
+
+def main(argv=None):
+    parser = build_parser()
+    args = parser.parse_args(argv)
+    try:
+        return args.func(args)
+    except CliError as exc:
+        print(f"probreg {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except (ValueError, FileNotFoundError, FileExistsError, PermissionError, NotADirectoryError) as exc:
+        print(f"probreg {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+    except OSError as exc:
+        print(f"probreg {args.command}: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":  # pragma: no cover
+    sys.exit(main())

@@ -1,0 +1,27 @@
+"""Readers and writers: one module per file format, apart from the domain model."""
+
+from .clip import (
+    Clip,
+    ClipFormatError,
+    GroundTruth,
+    atomic_output_dir,
+    load_clip,
+    load_groundtruth,
+    read_cameras_json,
+    read_keypoints_json,
+    write_json,
+    write_keypoints_json,
+)
+
+__all__ = [
+    "Clip",
+    "ClipFormatError",
+    "GroundTruth",
+    "atomic_output_dir",
+    "load_clip",
+    "load_groundtruth",
+    "read_cameras_json",
+    "read_keypoints_json",
+    "write_json",
+    "write_keypoints_json",
+]

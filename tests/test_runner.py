@@ -1,0 +1,88 @@
+import numpy as np
+import pytest
+
+from probreg.kinematics import cycle_curves, gait_cycles
+from probreg.runner import STYLES, Anthropometry, GaitParams, gait_for_style, simulate_runner
+from probreg.skeleton import JOINT_INDEX, bone_lengths, joint_angles
+
+
+@pytest.fixture(scope="module", params=sorted(STYLES))
+def motion(request):
+    rng = np.random.default_rng(3)
+    a = Anthropometry.from_stature(1.62 + 0.05 * len(request.param) % 0.35, rng=rng)
+    return simulate_runner(a, gait_for_style(request.param, rng=rng), 300, 50.0, rng=rng,
+                           start_x_m=10.0, lane_y_m=-3.05, start_phase=0.3)
+
+
+def test_segment_lengths_constant(motion):
+    assert np.max(np.ptp(bone_lengths(motion.joints_track_m), axis=0)) < 1e-3
+
+
+def test_stance_foot_does_not_slide(motion):
+    cp = motion.contact_points_track_m
+    for side in (0, 1):
+        for a, b in gait_cycles(motion.contacts[:, side]):
+            run = cp[a:b, side]
+            run = run[np.all(np.isfinite(run), axis=1)]
+            assert np.max(np.linalg.norm(run - run[0], axis=1)) < 0.02
+
+
+def test_contacts_match_foot_heights(motion):
+    j = motion.joints_track_m
+    h = motion.anthropometry.ankle_height_m
+    for side, ankle in ((0, "l_ankle"), (1, "r_ankle")):
+        z = j[:, JOINT_INDEX[ankle], 2]
+        c = motion.contacts[:, side]
+        assert np.all(z[c] < h + 0.12)        # foot flat or heel rising on the ball
+        assert np.all(z[c] >= h - 1e-9)
+        assert np.all(z[~c] > 0.03)           # swing foot clears the ground
+    # contact points of stance feet lie on the ground
+    cp = motion.contact_points_track_m
+    assert np.allclose(cp[np.isfinite(cp[..., 2])][:, 2], 0)
+
+
+def test_speed_and_cadence(motion):
+    g = motion.gait
+    pel = motion.joints_track_m[:, 0]
+    speed = (pel[-1, 0] - pel[0, 0]) / (motion.times_s[-1] - motion.times_s[0])
+    assert abs(speed - g.speed_mps) / g.speed_mps < 0.05
+    td = sorted(t for t, _, _ in motion.touchdowns)
+    assert np.allclose(np.diff(td), 1 / g.step_freq_hz)
+
+
+def test_angles_physiological(motion):
+    a = joint_angles(motion.joints_track_m)
+    for side in "lr":
+        assert 0 <= a[f"knee_{side}"].min() and a[f"knee_{side}"].max() < 150
+        assert -45 < a[f"hip_{side}"].min() and a[f"hip_{side}"].max() < 110
+        assert 20 < a[f"elbow_{side}"].min() and a[f"elbow_{side}"].max() < 150
+    assert 0 < a["trunk_lean"].min() and a["trunk_lean"].max() < 20
+
+
+def test_flight_phase_exists(motion):
+    assert np.any(~motion.contacts.any(axis=1))
+    assert not np.any(motion.contacts.all(axis=1))  # running: never double support
+
+
+def test_bad_parameters():
+    with pytest.raises(ValueError, match="stature"):
+        Anthropometry.from_stature(-1.7)
+    with pytest.raises(ValueError, match="style"):
+        gait_for_style("moonwalk")
+    with pytest.raises(ValueError, match="walking"):
+        GaitParams(speed_mps=2.0, step_freq_hz=2.0, contact_time_s=0.49)
+
+
+def test_knee_curve_close_to_real_mocap(shared_data):
+    """The synthetic knee-flexion cycle at the real clips' speed stays within 10 deg MAD of the real mean."""
+    from probreg.bench.realism import mocap_knee_cycles, synthetic_knee_cycles
+
+    curves, speeds = [], []
+    for p in sorted((shared_data / "mocap").glob("*.npz")):
+        c, v, _ = mocap_knee_cycles(p)
+        curves.append(c)
+        speeds.append(v)
+    real = np.concatenate(curves).mean(0)
+    syn, _ = synthetic_knee_cycles("jog", speed_mps=float(np.mean(speeds)))
+    assert np.mean(np.abs(syn.mean(0) - real)) < 10.0
+    assert cycle_curves(np.zeros(10), np.zeros(10, bool)).shape == (0, 101)
