@@ -1,0 +1,703 @@
+"""Lane-line detection and the vanishing point of the straight's lanes.
+
+Per frame: a white-line response (morphological top-hat of the per-pixel
+minimum over B, G, R: white is bright in every channel, the red track and the
+green infield are not) at reduced resolution, ``cv2.HoughLinesP`` segments,
+merging of collinear segments, sub-pixel re-measurement of every line at full
+resolution (intensity centroids of short perpendicular profiles), rejection
+of curved lines (bends), an exhaustive pair search for the vanishing point
+that most long lines share (robust to the athlete, kerbs and stray marks),
+and a least-squares refinement of the vanishing point in homogeneous
+coordinates, so that a vanishing point at infinity (a camera square onto the
+straight) is an ordinary case.  Lines are then re-fitted through the
+vanishing point, ordered across the track, and given integer indices (a
+missing line in the middle is found from the projective spacing fit when at
+least four lines are seen).
+
+Failures are per-frame statuses, never exceptions:
+
+``ok``
+    a pencil of at least three straight lines.
+``too_few_lines``
+    fewer than three lines share a vanishing point.
+``no_straight``
+    line evidence is there but curved (only a bend in view).
+``no_lines``
+    no line evidence at all.
+``bad_image``
+    the frame could not be read or is empty.
+"""
+
+from __future__ import annotations
+
+import itertools
+from dataclasses import dataclass, field, replace
+
+import cv2
+import numpy as np
+from scipy.optimize import least_squares
+
+from .camera import undistort_normalized
+
+__all__ = [
+    "LaneDetectorConfig",
+    "LaneLine",
+    "FrameLanes",
+    "STATUSES",
+    "detect_lanes",
+    "lines_through_point",
+    "assign_line_indices",
+    "smooth_vanishing_points",
+    "undistort_frame_lanes",
+    "draw_lanes",
+]
+
+STATUSES = ("ok", "too_few_lines", "no_straight", "no_lines", "bad_image")
+
+
+@dataclass(frozen=True)
+class LaneDetectorConfig:
+    """Tuning of :func:`detect_lanes` (defaults work for 720p-1080p broadcast frames)."""
+
+    work_width_px: int = 960
+    tophat_px: int = 15
+    threshold: int = 45
+    hough_threshold: int = 50
+    min_length_frac: float = 0.08
+    max_gap_px: int = 12
+    merge_angle_deg: float = 1.0
+    merge_dist_px: float = 4.0
+    profile_step_px: float = 5.0
+    vp_inlier_deg: float = 0.35
+    curved_sagitta_px: float = 4.0
+    curved_sagitta_frac: float = 0.006
+    min_lines: int = 3
+    max_missing_lines: int = 2
+
+
+@dataclass(frozen=True)
+class LaneLine:
+    """One lane line in one frame.
+
+    Attributes
+    ----------
+    line : ndarray, shape (3,)
+        Homogeneous image line ``(a, b, c)`` with ``a**2 + b**2 = 1`` (so ``line @ (x, y, 1)``
+        is a signed distance in px), in the (undistorted) pixel coordinates of the frame.
+    points_px : ndarray, shape (N, 2)
+        Sub-pixel centre points that support the line.
+    rms_px : float
+        RMS distance of the support points from the line.
+    index : int or None
+        Integer position across the track, 0 = innermost observed line
+        (set once the pencil is ordered).
+    """
+
+    line: np.ndarray
+    points_px: np.ndarray
+    rms_px: float
+    index: int | None = None
+
+    @property
+    def endpoints_px(self):
+        """The support's extreme points projected onto the line, shape (2, 2)."""
+        d = np.array([-self.line[1], self.line[0]])
+        t = self.points_px @ d
+        foot = self.points_px - np.outer(self.points_px @ self.line[:2] + self.line[2], self.line[:2])
+        return foot[[np.argmin(t), np.argmax(t)]]
+
+
+@dataclass(frozen=True)
+class FrameLanes:
+    """Lane evidence of one frame.
+
+    Attributes
+    ----------
+    status : str
+        One of :data:`STATUSES`.
+    lines : tuple of LaneLine
+        Ordered across the track (by ``index``) when ``status == "ok"``.
+    vanishing_point : ndarray, shape (3,) or None
+        Homogeneous pixel coordinates, unit norm in the scaled frame of ``vp_scale``.
+    vp_cov : ndarray, shape (3, 3) or None
+        Covariance of the unit homogeneous vector ``vp_unit`` (rank 2).
+    spacing_residual_px : float
+        With four or more lines: RMS misfit of an equally spaced pencil (NaN otherwise).
+    n_curved : int
+        Curved line candidates that were rejected.
+    image_size : tuple
+    undistorted : bool
+    """
+
+    status: str
+    lines: tuple = ()
+    vanishing_point: np.ndarray | None = None
+    vp_cov: np.ndarray | None = None
+    spacing_residual_px: float = float("nan")
+    n_curved: int = 0
+    image_size: tuple = (1920, 1080)
+    undistorted: bool = False
+    frame: int | None = None
+    extra: dict = field(default_factory=dict)
+
+    @property
+    def ok(self):
+        return self.status == "ok"
+
+    @property
+    def indices(self):
+        return np.array([ln.index for ln in self.lines])
+
+    def vp_px(self):
+        """Euclidean vanishing point (NaN when at infinity)."""
+        if self.vanishing_point is None:
+            return np.full(2, np.nan)
+        v = self.vanishing_point
+        if abs(v[2]) < 1e-12:
+            return np.full(2, np.nan)
+        return v[:2] / v[2]
+
+    def to_dict(self):
+        return {
+            "frame": self.frame, "status": self.status,
+            "vanishing_point": None if self.vanishing_point is None else self.vanishing_point.tolist(),
+            "vp_cov": None if self.vp_cov is None else self.vp_cov.tolist(),
+            "spacing_residual_px": self.spacing_residual_px, "n_curved": self.n_curved,
+            "lines": [{"index": ln.index, "line": ln.line.tolist(), "rms_px": ln.rms_px,
+                       "endpoints_px": ln.endpoints_px.tolist(), "n_points": len(ln.points_px)}
+                      for ln in self.lines],
+        }
+
+
+# --------------------------------------------------------------------------- helpers
+def _scale_frame(image_size):
+    """Centre and scale that map pixels to O(1) coordinates (conditioning of homogeneous maths)."""
+    w, h = image_size
+    return np.array([(w - 1) / 2, (h - 1) / 2]), float(np.hypot(w, h)) / 2
+
+
+def _to_unit(v_px, image_size):
+    """Homogeneous pixel point -> unit vector in the scaled frame."""
+    c, s = _scale_frame(image_size)
+    u = np.array([v_px[0] - c[0] * v_px[2], v_px[1] - c[1] * v_px[2], s * v_px[2]], float)
+    return u / np.linalg.norm(u)
+
+
+def _from_unit(u, image_size):
+    c, s = _scale_frame(image_size)
+    w = u[2] / s
+    return np.array([u[0] + c[0] * w, u[1] + c[1] * w, w])
+
+
+def _normalise_line(l):
+    return l / np.hypot(l[0], l[1])
+
+
+def _fit_line(points, weights=None):
+    """Total least-squares line through points (N, 2): unit-normal homogeneous line."""
+    w = np.ones(len(points)) if weights is None else weights
+    m = np.average(points, axis=0, weights=w)
+    d = points - m
+    cov = (d * w[:, None]).T @ d
+    evals, evecs = np.linalg.eigh(cov)
+    n = evecs[:, 0]
+    return np.array([n[0], n[1], -n @ m])
+
+
+def _white_response(gray_min, tophat_px):
+    k = cv2.getStructuringElement(cv2.MORPH_RECT, (tophat_px, tophat_px))
+    return cv2.morphologyEx(gray_min, cv2.MORPH_TOPHAT, k)
+
+
+def _segments(img_bgr, cfg):
+    h, w = img_bgr.shape[:2]
+    scale = min(1.0, cfg.work_width_px / w)
+    small = cv2.resize(img_bgr, (int(round(w * scale)), int(round(h * scale))),
+                       interpolation=cv2.INTER_AREA) if scale < 1 else img_bgr
+    gmin = cv2.min(cv2.min(small[..., 0], small[..., 1]), small[..., 2])
+    resp = _white_response(gmin, cfg.tophat_px)
+    _, mask = cv2.threshold(resp, cfg.threshold, 255, cv2.THRESH_BINARY)
+    segs = cv2.HoughLinesP(mask, 1, np.pi / 720, cfg.hough_threshold,
+                           minLineLength=cfg.min_length_frac * small.shape[1], maxLineGap=cfg.max_gap_px)
+    if segs is None:
+        return np.zeros((0, 4)), int(np.count_nonzero(mask))
+    return segs.reshape(-1, 4).astype(float) / scale, int(np.count_nonzero(mask))
+
+
+def _merge_segments(segs, cfg):
+    """Greedy clustering of collinear segments; returns a list of endpoint arrays."""
+    if len(segs) == 0:
+        return []
+    lengths = np.hypot(segs[:, 2] - segs[:, 0], segs[:, 3] - segs[:, 1])
+    order = np.argsort(-lengths)
+    clusters = []  # (line, points)
+    cos_tol = np.cos(np.radians(cfg.merge_angle_deg))
+    for i in order:
+        p = segs[i].reshape(2, 2)
+        d = (p[1] - p[0]) / max(lengths[i], 1e-9)
+        placed = False
+        for c in clusters:
+            line = c[0]
+            dn = np.array([-line[1], line[0]])
+            if abs(d @ dn) < cos_tol:
+                continue
+            if np.max(np.abs(p @ line[:2] + line[2])) < cfg.merge_dist_px:
+                c[1].append(p)
+                pts = np.concatenate(c[1])
+                c[0] = _fit_line(pts)
+                placed = True
+                break
+        if not placed:
+            clusters.append([_fit_line(p), [p]])
+    return [np.concatenate(c[1]) for c in clusters]
+
+
+def _measure_line(gray_min_full, endpoints, cfg):
+    """Sub-pixel centre points along a rough line via perpendicular intensity profiles."""
+    line = _fit_line(endpoints)
+    n = line[:2]
+    d = np.array([-n[1], n[0]])
+    t = endpoints @ d
+    t0, t1 = t.min(), t.max()
+    foot = -line[2] * n
+    ts = np.arange(t0, t1, cfg.profile_step_px)
+    if len(ts) < 4:
+        return None
+    half = 10.0
+    offs = np.arange(-half, half + 0.25, 0.5)
+    pts = foot + ts[:, None] * d
+    grid = pts[:, None, :] + offs[None, :, None] * n
+    mx = grid[..., 0].astype(np.float32)
+    my = grid[..., 1].astype(np.float32)
+    prof = cv2.remap(gray_min_full, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
+                     borderValue=0).astype(float)
+    base = np.minimum(prof[:, :4].mean(1), prof[:, -4:].mean(1))
+    wts = np.clip(prof - base[:, None], 0, None)
+    peak = wts.max(axis=1)
+    valid = (peak > cfg.threshold * 0.6) & (mx.min(1) >= 0) & (my.min(1) >= 0) \
+        & (mx.max(1) <= gray_min_full.shape[1] - 1) & (my.max(1) <= gray_min_full.shape[0] - 1)
+    # keep only the main peak (another line could enter a long profile near the vanishing point)
+    wts[wts < 0.5 * peak[:, None]] = 0
+    if valid.sum() < 4:
+        return None
+    off = (wts[valid] * offs).sum(1) / wts[valid].sum(1)
+    return pts[valid] + off[:, None] * n
+
+
+def _robust_fit(points, iters=3):
+    line = _fit_line(points)
+    keep = np.ones(len(points), bool)
+    for _ in range(iters):
+        r = np.abs(points @ line[:2] + line[2])
+        s = max(1.4826 * np.median(r[keep]), 0.3)
+        keep = r < 3.5 * s
+        if keep.sum() < 4:
+            break
+        line = _fit_line(points[keep])
+    return line, keep
+
+
+def _sagitta(points, line):
+    """Largest deviation of a quadratic fit from the straight line (px): curvature measure."""
+    n = line[:2]
+    d = np.array([-n[1], n[0]])
+    t = points @ d
+    r = points @ n + line[2]
+    if np.ptp(t) < 1e-6:
+        return 0.0
+    tt = (t - t.mean()) / (np.ptp(t) / 2)
+    coef = np.polyfit(tt, r, 2)
+    return abs(coef[0])  # quadratic term at the ends of the support
+
+
+def _angle_to_vp(line, mid, vp):
+    """Angle (rad) between a line and the direction from its midpoint to a homogeneous point."""
+    dirl = np.array([-line[1], line[0]])
+    to_vp = vp[:2] - mid * vp[2]
+    nrm = np.linalg.norm(to_vp)
+    if nrm < 1e-12:
+        return 0.0
+    c = abs(dirl @ to_vp) / nrm
+    return float(np.arccos(np.clip(c, -1, 1)))
+
+
+def lines_through_point(point_sets, vp_unit, image_size):
+    """Best lines through a common (homogeneous) point, each fitted to its support points.
+
+    Parameters
+    ----------
+    point_sets : list of ndarray (N_i, 2)
+        Support points (px) of each line.
+    vp_unit : ndarray, shape (3,)
+        The common point as a unit vector in the scaled frame (see ``FrameLanes``).
+    image_size : tuple
+
+    Returns
+    -------
+    lines : ndarray, shape (n, 3)
+        Unit-normal homogeneous lines in pixel coordinates.
+    residuals : list of ndarray
+        Signed distances (px) of every support point from its line.
+    """
+    c, s = _scale_frame(image_size)
+    v = vp_unit / np.linalg.norm(vp_unit)
+    # orthonormal basis of lines through v (in the scaled frame): l = a e1 + b e2
+    e1 = np.cross(v, [1.0, 0, 0] if abs(v[0]) < 0.9 else [0, 1.0, 0])
+    e1 /= np.linalg.norm(e1)
+    e2 = np.cross(v, e1)
+    E = np.stack([e1, e2], 1)
+    lines, res = [], []
+    for pts in point_sets:
+        q = np.column_stack([(pts - c) / s, np.ones(len(pts))])
+        A = q @ E
+        # geometric distance ~ (l.q) / |l_xy|: iterate the weighting once
+        _, _, vt = np.linalg.svd(A, full_matrices=False)
+        ab = vt[-1]
+        l_px = _line_from_scaled(E @ ab, image_size)
+        lines.append(l_px)
+        res.append(pts @ l_px[:2] + l_px[2])
+    return np.array(lines), res
+
+
+def _refine_vp(point_sets, vp_unit0, image_size):
+    """Least-squares vanishing point (2 DOF on the sphere) with covariance of the unit vector."""
+    v0 = vp_unit0 / np.linalg.norm(vp_unit0)
+    t1 = np.cross(v0, [1.0, 0, 0] if abs(v0[0]) < 0.9 else [0, 1.0, 0])
+    t1 /= np.linalg.norm(t1)
+    t2 = np.cross(v0, t1)
+
+    def unit(x):
+        u = v0 + x[0] * t1 + x[1] * t2
+        return u / np.linalg.norm(u)
+
+    def resid(x):
+        _, r = lines_through_point(point_sets, unit(x), image_size)
+        return np.concatenate(r)
+
+    sol = least_squares(resid, np.zeros(2), method="lm", x_scale=1e-3)
+    v = unit(sol.x)
+    r = sol.fun
+    dof = max(len(r) - 2 - len(point_sets), 1)
+    sigma2 = float(r @ r) / dof
+    J = sol.jac
+    try:
+        cov_x = sigma2 * np.linalg.inv(J.T @ J)
+    except np.linalg.LinAlgError:
+        cov_x = np.full((2, 2), np.nan)
+    T = np.stack([t1, t2], 1)
+    cov_u = T @ cov_x @ T.T
+    return v, cov_u, np.sqrt(sigma2)
+
+
+def _pencil_basis(vp_unit):
+    v = vp_unit / np.linalg.norm(vp_unit)
+    e1 = np.cross(v, [0.0, 0.0, 1.0]) if abs(v[2]) < 0.99 else np.cross(v, [1.0, 0.0, 0.0])
+    e1 /= np.linalg.norm(e1)
+    return e1, np.cross(v, e1)
+
+
+def _line_to_scaled(l_px, image_size):
+    c, s = _scale_frame(image_size)
+    return np.array([l_px[0] * s, l_px[1] * s, l_px[2] + l_px[0] * c[0] + l_px[1] * c[1]])
+
+
+def _line_from_scaled(l_s, image_size):
+    c, s = _scale_frame(image_size)
+    return _normalise_line(np.array([l_s[0], l_s[1], l_s[2] * s - l_s[0] * c[0] - l_s[1] * c[1]]))
+
+
+def _pencil_coordinate(lines_px, vp_unit, image_size):
+    """Angle (rad) of each line within the pencil through the vanishing point.
+
+    Lines through ``v`` form a projective line; the angle of a line in the
+    basis ``(e1, e2)`` of the plane orthogonal to ``v`` is a coordinate on it.
+    The circle of angles is cut at its largest empty gap so that the lines
+    seen in the image have increasing, continuous coordinates.
+    """
+    e1, e2 = _pencil_basis(vp_unit)
+    ls = np.array([_line_to_scaled(l, image_size) for l in lines_px])
+    ang = np.mod(np.arctan2(ls @ e2, ls @ e1), np.pi)
+    sa = np.sort(ang)
+    gaps = np.diff(np.concatenate([sa, [sa[0] + np.pi]]))
+    cut = sa[(np.argmax(gaps) + 1) % len(sa)]
+    return np.where(ang < cut, ang + np.pi, ang)
+
+
+def _pencil_line(angle, vp_unit, image_size):
+    e1, e2 = _pencil_basis(vp_unit)
+    return _line_from_scaled(np.cos(angle) * e1 + np.sin(angle) * e2, image_size)
+
+
+def assign_line_indices(pencil_coord, max_missing=2):
+    """Integer lane-line indices (0 = first in order) for lines sorted by pencil coordinate.
+
+    With three lines the lines are taken as consecutive.  With four or more,
+    gap patterns (a missing line in between) are scored by the misfit of a
+    1-D projective map from index to pencil coordinate, the image of equally
+    spaced lines; a gap must improve the fit clearly to be accepted.
+
+    Returns
+    -------
+    indices : ndarray of int
+    residual : float
+        RMS misfit of the chosen fit in pencil-coordinate units (NaN for three lines).
+    """
+    t = np.asarray(pencil_coord, float)
+    n = len(t)
+    base = np.arange(n)
+    if n < 4:
+        return base, float("nan")
+
+    def fit(k):
+        A = np.column_stack([k, np.ones(n), -t * k, -t])
+        _, _, vt = np.linalg.svd(A)
+        a, b, c, d = vt[-1]
+        pred = (a * k + b) / (c * k + d)
+        return float(np.sqrt(np.mean((pred - t) ** 2)))
+
+    best_k, best_r = base, fit(base.astype(float))
+    for extra in range(1, max_missing + 1):
+        for gaps in itertools.combinations_with_replacement(range(n - 1), extra):
+            inc = np.ones(n - 1)
+            for g in gaps:
+                inc[g] += 1
+            k = np.concatenate([[0], np.cumsum(inc)])
+            if k[-1] > 8:
+                continue
+            r = fit(k)
+            if r < 0.3 * best_r:
+                best_k, best_r = k.astype(int), r
+    return np.asarray(best_k, int), best_r
+
+
+# --------------------------------------------------------------------------- main entry
+def detect_lanes(image_bgr, config: LaneDetectorConfig = LaneDetectorConfig(), frame=None,
+                 dist=None, focal_px=None):
+    """Detect the lane lines of the straight and their vanishing point in one frame.
+
+    Parameters
+    ----------
+    image_bgr : ndarray, shape (H, W, 3), uint8, or None
+    config : LaneDetectorConfig
+    frame : int, optional
+        Frame index stored in the result.
+    dist : array_like (5,), optional
+        Known or hypothesised lens distortion; with ``focal_px`` the support points are
+        undistorted before the lines and the vanishing point are fitted.
+    focal_px : float, optional
+
+    Returns
+    -------
+    FrameLanes
+        Never raises for bad image content; see :data:`STATUSES`.
+    """
+    if image_bgr is None or not hasattr(image_bgr, "shape") or image_bgr.ndim != 3 or image_bgr.size == 0:
+        return FrameLanes(status="bad_image", frame=frame)
+    h, w = image_bgr.shape[:2]
+    size = (w, h)
+    segs, n_mask = _segments(image_bgr, config)
+    if len(segs) == 0:
+        return FrameLanes(status="no_lines", image_size=size, frame=frame, extra={"mask_px": n_mask})
+    gmin_full = cv2.min(cv2.min(image_bgr[..., 0], image_bgr[..., 1]), image_bgr[..., 2])
+    candidates = []
+    n_curved = 0
+    for ep in _merge_segments(segs, config):
+        pts = _measure_line(gmin_full, ep, config)
+        if pts is None or len(pts) < 6:
+            continue
+        line, keep = _robust_fit(pts)
+        pts = pts[keep]
+        if len(pts) < 6:
+            continue
+        length = np.ptp(pts @ np.array([-line[1], line[0]]))
+        if _sagitta(pts, line) > max(config.curved_sagitta_px, config.curved_sagitta_frac * length):
+            n_curved += 1
+            continue
+        candidates.append((line, pts, length))
+    # merge candidates that turned out to be the same line after re-measurement
+    candidates = _dedupe(candidates, config)
+    fl = FrameLanes(status="no_lines", image_size=size, frame=frame, n_curved=n_curved)
+    if len(candidates) < 2:
+        return replace(fl, status="no_straight" if n_curved >= 2 else
+                       ("too_few_lines" if candidates or n_curved else "no_lines"))
+    if dist is not None and focal_px is not None and np.any(dist):
+        candidates = [(_fit_line(p), p, L) for _, p, L in
+                      ((c[0], _undistort_px(c[1], dist, focal_px, size), c[2]) for c in candidates)]
+        fl = replace(fl, undistorted=True)
+    return _pencil_from_candidates(candidates, fl, config)
+
+
+def _undistort_px(points_px, dist, focal_px, image_size):
+    c, _ = _scale_frame(image_size)
+    xy = undistort_normalized((points_px - c) / focal_px, dist)
+    return xy * focal_px + c
+
+
+def _dedupe(cands, cfg):
+    out = []
+    for line, pts, L in sorted(cands, key=lambda c: -c[2]):
+        for k, (l2, p2, L2) in enumerate(out):
+            if abs(line[:2] @ l2[:2]) > np.cos(np.radians(cfg.merge_angle_deg)) and \
+                    np.median(np.abs(pts @ l2[:2] + l2[2])) < 2.0:
+                allp = np.concatenate([p2, pts])
+                out[k] = (_fit_line(allp), allp, L2 + L)
+                break
+        else:
+            out.append((line, pts, L))
+    return out
+
+
+def _pencil_from_candidates(cands, fl, cfg):
+    size = fl.image_size
+    mids = [p.mean(0) for _, p, _ in cands]
+    lengths = np.array([L for _, _, L in cands])
+    best, best_score = None, -1.0
+    tol = np.radians(cfg.vp_inlier_deg)
+    for i, j in itertools.combinations(range(len(cands)), 2):
+        vp = np.cross(cands[i][0], cands[j][0])
+        if not np.any(np.isfinite(vp)) or np.linalg.norm(vp) < 1e-15:
+            continue
+        inl = [k for k in range(len(cands)) if _angle_to_vp(cands[k][0], mids[k], vp) < tol]
+        score = lengths[inl].sum()
+        if len(inl) > (0 if best is None else len(best[1])) or (len(inl) == len(best[1]) and score > best_score):
+            best, best_score = (vp, inl), score
+    if best is None or len(best[1]) < cfg.min_lines:
+        status = "no_straight" if fl.n_curved >= 2 and (best is None or len(best[1]) < 2) else "too_few_lines"
+        return replace(fl, status=status)
+    vp, inl = best
+    sets = [cands[k][1] for k in inl]
+    v_unit, cov, sigma = _refine_vp(sets, _to_unit(vp, size), size)
+    lines_px, res = lines_through_point(sets, v_unit, size)
+    coord = _pencil_coordinate(lines_px, v_unit, size)
+    order = np.argsort(coord)
+    idx, spacing = assign_line_indices(coord[order], cfg.max_missing_lines)
+    lanes = tuple(LaneLine(line=lines_px[o], points_px=sets[o], rms_px=float(np.sqrt(np.mean(res[o] ** 2))),
+                           index=int(k)) for o, k in zip(order, idx))
+    spacing_px = (_spacing_residual_px(lanes, coord[order], idx, v_unit, size) if len(lanes) >= 4
+                  else float("nan"))
+    return replace(fl, status="ok", lines=lanes, vanishing_point=_from_unit(v_unit, size), vp_cov=cov,
+                   spacing_residual_px=spacing_px, extra={"vp_unit": v_unit, "vp_sigma_px": sigma})
+
+
+def _spacing_residual_px(lanes, coord, idx, vp_unit, image_size):
+    """RMS distance (px) of each line's support points from the line that the best
+    equally spaced pencil (a 1-D projective map of the indices) predicts."""
+    k = np.asarray(idx, float)
+    t = np.asarray(coord, float)
+    A = np.column_stack([k, np.ones(len(k)), -t * k, -t])
+    _, _, vt = np.linalg.svd(A)
+    a, b, c, d = vt[-1]
+    pred = (a * k + b) / (c * k + d)
+    sq = []
+    for ln, tp in zip(lanes, pred):
+        lp = _pencil_line(tp, vp_unit, image_size)
+        sq.append(np.mean((ln.points_px @ lp[:2] + lp[2]) ** 2))
+    return float(np.sqrt(np.mean(sq)))
+
+
+def undistort_frame_lanes(fl: FrameLanes, dist, focal_px, config=LaneDetectorConfig()):
+    """Re-fit a frame's lines and vanishing point after undistorting the support points."""
+    if not fl.ok:
+        return fl
+    cands = []
+    for ln in fl.lines:
+        p = _undistort_px(ln.points_px, dist, focal_px, fl.image_size)
+        cands.append((_fit_line(p), p, float(np.ptp(p @ np.array([-ln.line[1], ln.line[0]])))))
+    out = _pencil_from_candidates(cands, replace(fl, undistorted=True), config)
+    return out
+
+
+def smooth_vanishing_points(frames, process_std=0.002, min_var=1e-8):
+    """RTS-smooth the vanishing points of a clip (the broadcast camera moves smoothly).
+
+    The unit vector of each vanishing point (scaled homogeneous frame) is
+    smoothed with a constant-velocity Kalman filter and RTS smoother
+    (``filterpy``); frames without lanes are bridged.  Each frame's lines are
+    then re-fitted through its smoothed vanishing point.
+
+    Parameters
+    ----------
+    frames : list of FrameLanes
+    process_std : float
+        Acceleration noise of the unit vector per frame.
+
+    Returns
+    -------
+    list of FrameLanes
+        Same statuses; ``ok`` frames carry the smoothed vanishing point
+        (``extra["vp_raw"]`` keeps the per-frame estimate).
+    """
+    from filterpy.common import Q_discrete_white_noise
+    from filterpy.kalman import KalmanFilter, rts_smoother
+
+    ok = [i for i, f in enumerate(frames) if f.ok]
+    if len(ok) < 3:
+        return list(frames)
+    size = frames[ok[0]].image_size
+    zs = []
+    ref = None
+    for f in frames:
+        if not f.ok:
+            zs.append(None)
+            continue
+        u = f.extra.get("vp_unit", _to_unit(f.vanishing_point, size))
+        if ref is not None and u @ ref < 0:
+            u = -u
+        ref = u
+        zs.append(u)
+    kf = KalmanFilter(dim_x=6, dim_z=3)
+    F1 = np.array([[1.0, 1.0], [0.0, 1.0]])
+    kf.F = np.kron(np.eye(3), F1)
+    kf.H = np.kron(np.eye(3), np.array([[1.0, 0.0]]))
+    q = Q_discrete_white_noise(2, dt=1.0, var=process_std**2)
+    kf.Q = np.kron(np.eye(3), q)
+    kf.x = np.zeros(6)
+    kf.x[0::2] = zs[ok[0]]
+    kf.P = np.eye(6) * 1e-2
+    means, covs = [], []
+    for f, z in zip(frames, zs):
+        kf.predict()
+        if z is not None:
+            R = f.vp_cov + np.eye(3) * min_var if f.vp_cov is not None and np.all(np.isfinite(f.vp_cov)) \
+                else np.eye(3) * 1e-6
+            kf.update(z, R=R)
+        means.append(kf.x.copy())
+        covs.append(kf.P.copy())
+    xs, Ps, _, _ = rts_smoother(np.array(means), np.array(covs), kf.F, kf.Q)
+    out = []
+    for f, x, P in zip(frames, xs, Ps):
+        if not f.ok:
+            out.append(f)
+            continue
+        u = x[0::2] / np.linalg.norm(x[0::2])
+        lines_px, res = lines_through_point([ln.points_px for ln in f.lines], u, size)
+        lanes = tuple(replace(ln, line=l, rms_px=float(np.sqrt(np.mean(r ** 2))))
+                      for ln, l, r in zip(f.lines, lines_px, res))
+        cov = P[0::2, 0::2]
+        out.append(replace(f, lines=lanes, vanishing_point=_from_unit(u, size), vp_cov=cov,
+                           extra={**f.extra, "vp_unit": u, "vp_raw": f.vanishing_point}))
+    return out
+
+
+def draw_lanes(image_bgr, fl: FrameLanes, color=(255, 0, 255)):
+    """Overlay of the detected lines (with their indices) and the vanishing point (if in view)."""
+    img = image_bgr.copy()
+    h, w = img.shape[:2]
+    for ln in fl.lines:
+        a, b, c = ln.line
+        if abs(b) > abs(a):
+            p0 = (0, -c / b)
+            p1 = (w - 1, -(c + a * (w - 1)) / b)
+        else:
+            p0 = (-c / a, 0)
+            p1 = (-(c + b * (h - 1)) / a, h - 1)
+        if all(np.isfinite(p0 + p1)) and max(map(abs, p0 + p1)) < 1e6:
+            cv2.line(img, tuple(int(round(v)) for v in p0), tuple(int(round(v)) for v in p1), color, 2, cv2.LINE_AA)
+        e = ln.endpoints_px
+        cv2.putText(img, str(ln.index), tuple(int(v) for v in e[1]), cv2.FONT_HERSHEY_SIMPLEX, 1.0, color, 2)
+    vp = fl.vp_px()
+    if np.all(np.isfinite(vp)) and -w < vp[0] < 2 * w and -h < vp[1] < 2 * h:
+        cv2.circle(img, (int(vp[0]), int(vp[1])), 12, (0, 255, 255), 3)
+    label = f"{fl.status}  lines={len(fl.lines)}"
+    cv2.putText(img, label, (20, 40), cv2.FONT_HERSHEY_SIMPLEX, 1.2, (0, 255, 255), 2)
+    return img
