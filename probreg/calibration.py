@@ -206,7 +206,8 @@ class CalibrationFamily:
         Returns
         -------
         dict of arrays with leading shape ``focal_px.shape``: ``R`` (..., 3, 3),
-        ``height_m``, ``y_m``, ``residual``, ``valid``.
+        ``height_m``, ``y_m``, ``residual``, ``valid``, ``index_flipped`` (the lines'
+        indices count from the other end of the pencil: absolute index = max - index).
         """
         f = np.atleast_1d(np.asarray(focal_px, float))
         cx, cy = self.principal_point
@@ -260,15 +261,19 @@ class CalibrationFamily:
         # affine fit g = A + B k  ->  h = -lane_width / B
         kc = k - k.mean()
         B = (g - g.mean(-1, keepdims=True)) @ kc / (kc @ kc)
-        h = -self.lane_width_m / B
-        # index orientation: line 0 must be the innermost (largest y); with B > 0 the
-        # pencil order runs the other way: flip the indices
-        resid = sv[:, -1] / np.maximum(sv[:, 0], 1e-300) if M.shape[1] > 1 else np.zeros(len(f))
         A = g.mean(-1) - B * k.mean()
+        # index orientation: line 0 must be the innermost (largest y).  With B > 0 the
+        # image order of the pencil runs outward-in: count the indices from the other end.
+        flipped = B > 0
+        A = np.where(flipped, A + B * k.max(), A)
+        B = np.where(flipped, -B, B)
+        h = -self.lane_width_m / B
+        resid = sv[:, -1] / np.maximum(sv[:, 0], 1e-300)
         y_cam = -h * A  # line 0 at y = 0: 0 = y_cam + h * (A + B * 0)
         valid = np.all(cosd < 0, -1) & (h > 0) & np.isfinite(h)
         R = np.stack([r1, ey, u], -1)  # columns: track axes in camera coordinates
-        return {"R": R, "height_m": h, "y_m": y_cam, "residual": resid, "valid": valid}
+        return {"R": R, "height_m": h, "y_m": y_cam, "residual": resid, "valid": valid,
+                "index_flipped": flipped}
 
     def member_at_focal(self, focal_px):
         m = self.members(np.array([float(focal_px)]))
@@ -276,7 +281,7 @@ class CalibrationFamily:
                             y_m=float(m["y_m"][0]), residual=float(m["residual"][0]),
                             valid=bool(m["valid"][0]))
 
-    def focal_range(self, fov_range_deg=(0.3, 150.0), n=400):
+    def focal_range(self, fov_range_deg=(0.3, 150.0), n=120):
         """Focal lengths (log grid) over which the family exists, with their heights."""
         w = self.image_size[0]
         f = np.geomspace(focal_from_fov(fov_range_deg[1], w), focal_from_fov(fov_range_deg[0], w), n)
@@ -416,6 +421,7 @@ class SequenceCalibration:
     image_size: tuple
     lane_width_m: float = LANE_WIDTH_M
     line_offsets: np.ndarray = field(default=None)
+    branch: str = "narrow"
 
     def __post_init__(self):
         if self.line_offsets is None:
@@ -436,7 +442,7 @@ class SequenceCalibration:
                 out.append(None)
                 continue
             try:
-                out.append(fam.member(height_m=height_m))
+                out.append(fam.member_at_focal(HeightParameter().focal_for(fam, height_m, self.branch)))
             except CalibrationError:
                 out.append(None)
         return out
@@ -478,7 +484,7 @@ class SequenceCalibration:
             return float("nan")
         return float(1.4826 * np.median(np.abs(ys - np.median(ys))))
 
-    def anchor_to_athlete(self, height_m, ground_points_px, athlete_lane):
+    def anchor_to_athlete(self, height_m, ground_points_px, athlete_lane, ground_height_m=0.0):
         """Absolute line offset from the athlete's ground contact (e.g. ankles) in the given lane.
 
         Parameters
@@ -487,6 +493,8 @@ class SequenceCalibration:
             Image points that lie on (or just above) the ground, NaN where missing.
         athlete_lane : int
             1-based lane.
+        ground_height_m : float
+            Height of those points above the ground (ankle joints: about 0.07 m).
 
         Returns
         -------
@@ -500,7 +508,7 @@ class SequenceCalibration:
                 continue
             p = pts[np.all(np.isfinite(pts), -1)]
             if len(p):
-                g = cam.cast_to_ground(p)
+                g = cam.cast_to_ground(p, height_m=ground_height_m)
                 ys.extend(g[np.isfinite(g[:, 1]), 1])
         if not ys:
             return 0

@@ -45,6 +45,7 @@ __all__ = [
     "FrameLanes",
     "STATUSES",
     "detect_lanes",
+    "track_lanes",
     "lines_through_point",
     "assign_line_indices",
     "smooth_vanishing_points",
@@ -67,12 +68,14 @@ class LaneDetectorConfig:
     max_gap_px: int = 12
     merge_angle_deg: float = 1.0
     merge_dist_px: float = 4.0
-    profile_step_px: float = 5.0
+    profile_step_px: float = 8.0
     vp_inlier_deg: float = 0.35
     curved_sagitta_px: float = 4.0
     curved_sagitta_frac: float = 0.006
     min_lines: int = 3
     max_missing_lines: int = 2
+    redetect_every: int = 10
+    max_segments: int = 80
 
 
 @dataclass(frozen=True)
@@ -193,14 +196,14 @@ def _normalise_line(l):
     return l / np.hypot(l[0], l[1])
 
 
-def _fit_line(points, weights=None):
+def _fit_line(points):
     """Total least-squares line through points (N, 2): unit-normal homogeneous line."""
-    w = np.ones(len(points)) if weights is None else weights
-    m = np.average(points, axis=0, weights=w)
+    m = points.mean(axis=0)
     d = points - m
-    cov = (d * w[:, None]).T @ d
-    evals, evecs = np.linalg.eigh(cov)
-    n = evecs[:, 0]
+    sxx, syy, sxy = d[:, 0] @ d[:, 0], d[:, 1] @ d[:, 1], d[:, 0] @ d[:, 1]
+    # direction of largest spread of the 2x2 scatter matrix, closed form
+    ang = 0.5 * np.arctan2(2 * sxy, sxx - syy)
+    n = np.array([-np.sin(ang), np.cos(ang)])
     return np.array([n[0], n[1], -n @ m])
 
 
@@ -217,11 +220,22 @@ def _segments(img_bgr, cfg):
     gmin = cv2.min(cv2.min(small[..., 0], small[..., 1]), small[..., 2])
     resp = _white_response(gmin, cfg.tophat_px)
     _, mask = cv2.threshold(resp, cfg.threshold, 255, cv2.THRESH_BINARY)
-    segs = cv2.HoughLinesP(mask, 1, np.pi / 720, cfg.hough_threshold,
+    # thin wide lines to their ridge (local maximum across rows or across columns): the
+    # Hough transform's cost grows with the number of points, its result does not improve
+    r = resp.astype(np.int16)
+    ridge = np.zeros(r.shape, bool)
+    ridge[1:-1, :] |= (r[1:-1] >= r[:-2]) & (r[1:-1] > r[2:])
+    ridge[:, 1:-1] |= (r[:, 1:-1] >= r[:, :-2]) & (r[:, 1:-1] > r[:, 2:])
+    mask = np.where(ridge, mask, 0).astype(np.uint8)
+    segs = cv2.HoughLinesP(mask, 1, np.pi / 360, cfg.hough_threshold,
                            minLineLength=cfg.min_length_frac * small.shape[1], maxLineGap=cfg.max_gap_px)
     if segs is None:
         return np.zeros((0, 4)), int(np.count_nonzero(mask))
-    return segs.reshape(-1, 4).astype(float) / scale, int(np.count_nonzero(mask))
+    segs = segs.reshape(-1, 4).astype(float) / scale
+    if len(segs) > cfg.max_segments:
+        keep = np.argsort(-np.hypot(segs[:, 2] - segs[:, 0], segs[:, 3] - segs[:, 1]))[:cfg.max_segments]
+        segs = segs[keep]
+    return segs, int(np.count_nonzero(mask))
 
 
 def _merge_segments(segs, cfg):
@@ -252,7 +266,7 @@ def _merge_segments(segs, cfg):
     return [np.concatenate(c[1]) for c in clusters]
 
 
-def _measure_line(gray_min_full, endpoints, cfg):
+def _measure_line(image_bgr, endpoints, cfg):
     """Sub-pixel centre points along a rough line via perpendicular intensity profiles."""
     line = _fit_line(endpoints)
     n = line[:2]
@@ -269,15 +283,26 @@ def _measure_line(gray_min_full, endpoints, cfg):
     grid = pts[:, None, :] + offs[None, :, None] * n
     mx = grid[..., 0].astype(np.float32)
     my = grid[..., 1].astype(np.float32)
-    prof = cv2.remap(gray_min_full, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT,
-                     borderValue=0).astype(float)
-    base = np.minimum(prof[:, :4].mean(1), prof[:, -4:].mean(1))
-    wts = np.clip(prof - base[:, None], 0, None)
-    peak = wts.max(axis=1)
+    # per-pixel minimum over B, G, R of the bilinearly sampled profile (white = bright in all)
+    rgb = cv2.remap(image_bgr, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    prof = np.minimum(np.minimum(rgb[..., 0], rgb[..., 1]), rgb[..., 2]).astype(float)
+    # background level per side of the peak: the two sides may differ (infield vs track)
+    am = np.argmax(prof, axis=1)
+    cols = np.arange(len(offs))[None, :]
+    base = np.where(cols < am[:, None], prof[:, :4].mean(1)[:, None], prof[:, -4:].mean(1)[:, None])
+    # weights ~ line coverage on both sides: normalise by the contrast on each side
+    top = prof.max(axis=1)[:, None]
+    peak = (top - np.minimum(prof[:, :4].mean(1), prof[:, -4:].mean(1))[:, None])[:, 0]
+    wts = np.clip((prof - base) / np.maximum(top - base, 1e-6), 0, None) * peak[:, None]
     valid = (peak > cfg.threshold * 0.6) & (mx.min(1) >= 0) & (my.min(1) >= 0) \
-        & (mx.max(1) <= gray_min_full.shape[1] - 1) & (my.max(1) <= gray_min_full.shape[0] - 1)
-    # keep only the main peak (another line could enter a long profile near the vanishing point)
-    wts[wts < 0.5 * peak[:, None]] = 0
+        & (mx.max(1) <= image_bgr.shape[1] - 1) & (my.max(1) <= image_bgr.shape[0] - 1)
+    # centroid over the contiguous run around the peak only (a neighbouring line, or the
+    # brighter of two differently coloured backgrounds, must not pull it; a hard half-peak
+    # cut would bias thin, anti-aliased lines)
+    low = wts <= 0.15 * peak[:, None]
+    left = np.where(low & (cols < am[:, None]), cols, -1).max(1)
+    right = np.where(low & (cols > am[:, None]), cols, len(offs)).min(1)
+    wts = np.where((cols > left[:, None]) & (cols < right[:, None]), wts, 0.0)
     if valid.sum() < 4:
         return None
     off = (wts[valid] * offs).sum(1) / wts[valid].sum(1)
@@ -310,17 +335,6 @@ def _sagitta(points, line):
     return abs(coef[0])  # quadratic term at the ends of the support
 
 
-def _angle_to_vp(line, mid, vp):
-    """Angle (rad) between a line and the direction from its midpoint to a homogeneous point."""
-    dirl = np.array([-line[1], line[0]])
-    to_vp = vp[:2] - mid * vp[2]
-    nrm = np.linalg.norm(to_vp)
-    if nrm < 1e-12:
-        return 0.0
-    c = abs(dirl @ to_vp) / nrm
-    return float(np.arccos(np.clip(c, -1, 1)))
-
-
 def lines_through_point(point_sets, vp_unit, image_size):
     """Best lines through a common (homogeneous) point, each fitted to its support points.
 
@@ -346,17 +360,23 @@ def lines_through_point(point_sets, vp_unit, image_size):
     e1 /= np.linalg.norm(e1)
     e2 = np.cross(v, e1)
     E = np.stack([e1, e2], 1)
-    lines, res = [], []
-    for pts in point_sets:
-        q = np.column_stack([(pts - c) / s, np.ones(len(pts))])
-        A = q @ E
-        # geometric distance ~ (l.q) / |l_xy|: iterate the weighting once
-        _, _, vt = np.linalg.svd(A, full_matrices=False)
-        ab = vt[-1]
-        l_px = _line_from_scaled(E @ ab, image_size)
-        lines.append(l_px)
-        res.append(pts @ l_px[:2] + l_px[2])
-    return np.array(lines), res
+    sizes = [len(p) for p in point_sets]
+    pts = np.concatenate(point_sets)
+    q = np.column_stack([(pts - c) / s, np.ones(len(pts))])
+    A = q @ E  # (N, 2): algebraic residual of line (a, b) is A @ (a, b)
+    starts = np.concatenate([[0], np.cumsum(sizes)[:-1]])
+    # per line 2x2 normal matrix, smallest eigenvector in closed form
+    m00 = np.add.reduceat(A[:, 0] * A[:, 0], starts)
+    m11 = np.add.reduceat(A[:, 1] * A[:, 1], starts)
+    m01 = np.add.reduceat(A[:, 0] * A[:, 1], starts)
+    ang = 0.5 * np.arctan2(2 * m01, m00 - m11)  # direction of the largest eigenvalue
+    ab = np.stack([-np.sin(ang), np.cos(ang)], -1)  # its orthogonal: the smallest
+    ls = ab @ E.T  # (n, 3) lines in the scaled frame
+    lines = np.stack([ls[:, 0], ls[:, 1], ls[:, 2] * s - ls[:, 0] * c[0] - ls[:, 1] * c[1]], -1)
+    lines /= np.hypot(lines[:, 0], lines[:, 1])[:, None]
+    seg = np.repeat(np.arange(len(sizes)), sizes)
+    r = np.einsum("ij,ij->i", pts, lines[seg, :2]) + lines[seg, 2]
+    return lines, np.split(r, np.cumsum(sizes)[:-1])
 
 
 def _refine_vp(point_sets, vp_unit0, image_size):
@@ -498,22 +518,9 @@ def detect_lanes(image_bgr, config: LaneDetectorConfig = LaneDetectorConfig(), f
     segs, n_mask = _segments(image_bgr, config)
     if len(segs) == 0:
         return FrameLanes(status="no_lines", image_size=size, frame=frame, extra={"mask_px": n_mask})
-    gmin_full = cv2.min(cv2.min(image_bgr[..., 0], image_bgr[..., 1]), image_bgr[..., 2])
     candidates = []
     n_curved = 0
-    for ep in _merge_segments(segs, config):
-        pts = _measure_line(gmin_full, ep, config)
-        if pts is None or len(pts) < 6:
-            continue
-        line, keep = _robust_fit(pts)
-        pts = pts[keep]
-        if len(pts) < 6:
-            continue
-        length = np.ptp(pts @ np.array([-line[1], line[0]]))
-        if _sagitta(pts, line) > max(config.curved_sagitta_px, config.curved_sagitta_frac * length):
-            n_curved += 1
-            continue
-        candidates.append((line, pts, length))
+    candidates, n_curved = _measure_candidates(image_bgr, _merge_segments(segs, config), config)
     # merge candidates that turned out to be the same line after re-measurement
     candidates = _dedupe(candidates, config)
     fl = FrameLanes(status="no_lines", image_size=size, frame=frame, n_curved=n_curved)
@@ -525,6 +532,91 @@ def detect_lanes(image_bgr, config: LaneDetectorConfig = LaneDetectorConfig(), f
                       ((c[0], _undistort_px(c[1], dist, focal_px, size), c[2]) for c in candidates)]
         fl = replace(fl, undistorted=True)
     return _pencil_from_candidates(candidates, fl, config)
+
+
+def _measure_candidates(image_bgr, endpoint_sets, config):
+    """Sub-pixel measurement of rough lines (longest first); curved ones are counted, not kept."""
+    candidates, measured = [], []
+    n_curved = 0
+    for ep in sorted(endpoint_sets, key=lambda e: -np.ptp(e, axis=0).max()):
+        # a cluster lying on an already measured line is a duplicate: skip the costly profiles
+        if any(np.max(np.abs(ep @ m[:2] + m[2])) < 3.0 for m in measured):
+            continue
+        pts = _measure_line(image_bgr, ep, config)
+        if pts is None or len(pts) < 6:
+            continue
+        line, keep = _robust_fit(pts)
+        pts = pts[keep]
+        if len(pts) < 6:
+            continue
+        length = np.ptp(pts @ np.array([-line[1], line[0]]))
+        if _sagitta(pts, line) > max(config.curved_sagitta_px, config.curved_sagitta_frac * length):
+            n_curved += 1
+            continue
+        candidates.append((line, pts, length))
+        measured.append(line)
+    return candidates, n_curved
+
+
+def _image_chord(line, image_size):
+    """The two points where a line leaves the image rectangle, shape (2, 2) (None if outside)."""
+    w, h = image_size
+    a, b, c = line
+    pts = []
+    if abs(b) > 1e-12:
+        for x in (0.0, w - 1.0):
+            y = -(a * x + c) / b
+            if 0 <= y <= h - 1:
+                pts.append((x, y))
+    if abs(a) > 1e-12:
+        for y in (0.0, h - 1.0):
+            x = -(b * y + c) / a
+            if 0 <= x <= w - 1:
+                pts.append((x, y))
+    if len(pts) < 2:
+        return None
+    pts = np.array(pts)
+    d = np.array([-b, a])
+    t = pts @ d
+    return pts[[np.argmin(t), np.argmax(t)]]
+
+
+def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig()):
+    """Lanes of a frame sequence, following the lines from frame to frame.
+
+    The broadcast camera moves smoothly, so each frame's lines are first
+    re-measured around the previous frame's lines (no Hough transform); a full
+    :func:`detect_lanes` runs on the first frame, every ``redetect_every``
+    frames (to pick up lines entering the view), and whenever following loses
+    a line or fails.
+
+    Parameters
+    ----------
+    frames : iterable of (index, image or None)
+
+    Returns
+    -------
+    list of FrameLanes
+    """
+    out = []
+    prev = None
+    for k, (i, img) in enumerate(frames):
+        fl = None
+        if prev is not None and prev.ok and img is not None and k % max(config.redetect_every, 1):
+            size = (img.shape[1], img.shape[0])
+            chords = [c for c in (_image_chord(ln.line, size) for ln in prev.lines) if c is not None]
+            cands, n_curved = _measure_candidates(img, chords, config)
+            if len(cands) >= max(config.min_lines, len(prev.lines) - 1):
+                fl = _pencil_from_candidates(_dedupe(cands, config),
+                                             FrameLanes(status="no_lines", image_size=size, frame=i,
+                                                        n_curved=n_curved), config)
+                if not fl.ok or len(fl.lines) < len(prev.lines) - 1:
+                    fl = None
+        if fl is None:
+            fl = detect_lanes(img, config, frame=i)
+        out.append(fl)
+        prev = fl if fl.ok else None
+    return out
 
 
 def _undistort_px(points_px, dist, focal_px, image_size):
@@ -549,20 +641,26 @@ def _dedupe(cands, cfg):
 
 def _pencil_from_candidates(cands, fl, cfg):
     size = fl.image_size
-    mids = [p.mean(0) for _, p, _ in cands]
+    mids = np.array([p.mean(0) for _, p, _ in cands])
+    lines = np.array([c[0] for c in cands])
     lengths = np.array([L for _, _, L in cands])
-    best, best_score = None, -1.0
-    tol = np.radians(cfg.vp_inlier_deg)
-    for i, j in itertools.combinations(range(len(cands)), 2):
-        vp = np.cross(cands[i][0], cands[j][0])
-        if not np.any(np.isfinite(vp)) or np.linalg.norm(vp) < 1e-15:
-            continue
-        inl = [k for k in range(len(cands)) if _angle_to_vp(cands[k][0], mids[k], vp) < tol]
-        score = lengths[inl].sum()
-        if len(inl) > (0 if best is None else len(best[1])) or (len(inl) == len(best[1]) and score > best_score):
-            best, best_score = (vp, inl), score
-    if best is None or len(best[1]) < cfg.min_lines:
-        status = "no_straight" if fl.n_curved >= 2 and (best is None or len(best[1]) < 2) else "too_few_lines"
+    n = len(cands)
+    ii, jj = np.triu_indices(n, 1)
+    vps = np.cross(lines[ii], lines[jj])  # (P, 3) candidate vanishing points
+    # angle between every line and the direction from its midpoint to every candidate
+    dirs = np.stack([-lines[:, 1], lines[:, 0]], -1)  # (n, 2)
+    to_vp = vps[:, None, :2] - mids[None] * vps[:, None, 2:3]  # (P, n, 2)
+    nrm = np.linalg.norm(to_vp, axis=-1)
+    cosang = np.abs(np.sum(to_vp * dirs[None], -1)) / np.maximum(nrm, 1e-300)
+    inlier = (cosang > np.cos(np.radians(cfg.vp_inlier_deg))) | (nrm < 1e-9)
+    count = inlier.sum(1)
+    score = count * 1e9 + inlier @ lengths  # most lines first, then the longest support
+    if len(score) == 0:
+        return replace(fl, status="too_few_lines")
+    p = int(np.argmax(score))
+    best = (vps[p], list(np.flatnonzero(inlier[p])))
+    if len(best[1]) < cfg.min_lines:
+        status = "no_straight" if fl.n_curved >= 2 and len(best[1]) < 2 else "too_few_lines"
         return replace(fl, status=status)
     vp, inl = best
     sets = [cands[k][1] for k in inl]
@@ -628,7 +726,7 @@ def smooth_vanishing_points(frames, process_std=0.002, min_var=1e-8):
         (``extra["vp_raw"]`` keeps the per-frame estimate).
     """
     from filterpy.common import Q_discrete_white_noise
-    from filterpy.kalman import KalmanFilter, rts_smoother
+    from filterpy.kalman import KalmanFilter
 
     ok = [i for i, f in enumerate(frames) if f.ok]
     if len(ok) < 3:
@@ -663,7 +761,7 @@ def smooth_vanishing_points(frames, process_std=0.002, min_var=1e-8):
             kf.update(z, R=R)
         means.append(kf.x.copy())
         covs.append(kf.P.copy())
-    xs, Ps, _, _ = rts_smoother(np.array(means), np.array(covs), kf.F, kf.Q)
+    xs, Ps, _, _ = kf.rts_smoother(np.array(means), np.array(covs))
     out = []
     for f, x, P in zip(frames, xs, Ps):
         if not f.ok:

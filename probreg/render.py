@@ -40,6 +40,7 @@ class RenderStyle:
     blur_sigma_px: float = 0.6
     noise_sigma: float = 3.0
     jpeg_quality: int = 90
+    supersample: int = 4
 
 
 def _clip_polygon(pts_cam, halfspaces):
@@ -90,13 +91,23 @@ def _project_polygon(camera: Camera, poly_track):
     return xy * camera.focal_px + camera.K[:2, 2]
 
 
-def _fill(img, pts_px, color):
+def _fill(img, pts_px, color, supersample=1):
+    """Fill a polygon given in output-pixel coordinates.
+
+    With ``supersample = s`` the canvas is ``s`` times larger and is later
+    area-averaged down: pixel centres map as ``p_hi = (p + 0.5) s - 0.5``, and
+    the area average gives exact coverage anti-aliasing (OpenCV's own polygon
+    anti-aliasing shifts thin lines by up to a quarter pixel).
+    """
     if pts_px is None or len(pts_px) < 3:
         return
+    if supersample > 1:
+        pts_px = (pts_px + 0.5) * supersample - 0.5
     pts = np.round(pts_px * _SCALE).astype(np.int64)
-    lim = np.iinfo(np.int32).max // 2
+    lim = 2**28
     pts = np.clip(pts, -lim, lim).astype(np.int32)
-    cv2.fillPoly(img, [pts.reshape(-1, 1, 2)], color, lineType=cv2.LINE_AA, shift=_SHIFT)
+    aa = cv2.LINE_AA if supersample == 1 else cv2.LINE_8
+    cv2.fillPoly(img, [pts.reshape(-1, 1, 2)], color, lineType=aa, shift=_SHIFT)
 
 
 def _strip(points, width_m):
@@ -111,12 +122,13 @@ def _strip(points, width_m):
     return np.concatenate([left, right[::-1]])
 
 
-def lane_line_polygons(track: TrackGeometry = STANDARD_TRACK, bends=True):
-    """Ground polygons of every lane line: straight quads, then bend strips."""
+def lane_line_polygons(track: TrackGeometry = STANDARD_TRACK, bends=True, straights=None):
+    """Ground polygons of the lane lines: straight quads (all, or the indices in
+    ``straights``), then bend strips."""
     x0, x1 = track.straight_x_range()
     polys = []
     hw = track.line_width_m / 2
-    for i in range(track.n_lines):
+    for i in range(track.n_lines) if straights is None else straights:
         y = float(track.line_y(i))
         polys.append(np.array([[x0, y - hw, 0], [x1, y - hw, 0], [x1, y + hw, 0], [x0, y + hw, 0]]))
     if bends:
@@ -126,9 +138,89 @@ def lane_line_polygons(track: TrackGeometry = STANDARD_TRACK, bends=True):
     return polys
 
 
+def _oriented(line, inside_px):
+    """Unit-normal homogeneous line, signed so that ``inside_px`` is on its positive side."""
+    line = line / np.hypot(line[0], line[1])
+    return line if line @ [inside_px[0], inside_px[1], 1.0] > 0 else -line
+
+
+def _straight_lines_alpha(camera: Camera, track: TrackGeometry, alpha, max_band_px=80):
+    """Exact coverage of the straight lane lines (undistorted camera only).
+
+    Each line is the band between the images of its two edges, cut by the
+    images of its end caps and by the horizon; a pixel's coverage is the
+    box-filtered overlap of those half-planes (exact for thin lines and
+    axis-aligned edges, symmetric otherwise, so centres are unbiased).
+    Returns the indices of lines too wide for a band (drawn as polygons instead).
+    """
+    P = camera.projection_matrix
+    w, h = camera.image_size
+    up = camera.R @ [0.0, 0.0, 1.0]
+    horizon = np.linalg.inv(camera.K).T @ up  # image of the ground's line at infinity
+    x0, x1 = track.straight_x_range()
+    hw = track.line_width_m / 2
+    too_wide = []
+
+    def img_line(p, q):
+        return np.cross(P @ np.append(p, 1.0), P @ np.append(q, 1.0))
+
+    for i in range(track.n_lines):
+        y = float(track.line_y(i))
+        # a visible point of the line's centre, to orient the half-planes
+        xs = np.linspace(x0, x1, 400)
+        cen = camera.project(np.column_stack([xs, np.full_like(xs, y), np.zeros_like(xs)]))
+        vis = np.all(np.isfinite(cen), 1) & camera.in_image(cen, margin_px=50)
+        if not vis.any():
+            continue
+        inside = cen[np.flatnonzero(vis)[vis.sum() // 2]]
+        edges = [_oriented(img_line([0, y - hw, 0], [1, y - hw, 0]), inside),
+                 _oriented(img_line([0, y + hw, 0], [1, y + hw, 0]), inside)]
+        caps = [_oriented(img_line([xc, y - hw, 0], [xc, y + hw, 0]), inside) for xc in (x0, x1)
+                if np.all(np.isfinite(camera.project([xc, y, 0.0])))]
+        caps.append(_oriented(horizon, inside))
+        horizontal = abs(edges[0][1]) >= abs(edges[0][0])  # normal mostly vertical
+        n_long = w if horizontal else h
+        t = np.arange(n_long, dtype=float)
+        # positions across the band where each edge crosses every column (row)
+        a_i, b_i = (1, 0) if horizontal else (0, 1)
+        cross = [-(e[b_i] * t + e[2]) / e[a_i] for e in edges]
+        lo = np.floor(np.minimum(*cross)) - 1
+        hi = np.ceil(np.maximum(*cross)) + 1
+        band = int(np.nanmax(hi - lo)) + 1 if np.any(np.isfinite(hi - lo)) else 0
+        if band > max_band_px:
+            too_wide.append(i)
+            continue
+        if band <= 0:
+            continue
+        n_across = h if horizontal else w
+        start = np.clip(lo, -band, n_across)
+        across = start[:, None] + np.arange(band)[None, :]
+        along = np.broadcast_to(t[:, None], across.shape)
+        X, Y = (along, across) if horizontal else (across, along)
+        ok = (across >= 0) & (across < n_across)
+        cov = np.clip(edges[0][0] * X + edges[0][1] * Y + edges[0][2] + 0.5, 0, 1) \
+            + np.clip(edges[1][0] * X + edges[1][1] * Y + edges[1][2] + 0.5, 0, 1) - 1.0
+        cov = np.clip(cov, 0, 1)
+        for cap in caps:
+            cov *= np.clip(cap[0] * X + cap[1] * Y + cap[2] + 0.5, 0, 1)
+        keep = ok & (cov > 0)
+        xi, yi = X[keep].astype(int), Y[keep].astype(int)
+        alpha[yi, xi] = np.maximum(alpha[yi, xi], cov[keep].astype(np.float32))
+    return too_wide
+
+
 def render_background(camera: Camera, track: TrackGeometry = STANDARD_TRACK,
-                      style: RenderStyle = RenderStyle()):
-    """Stands, surround, track surface, infield and lane lines (uint8 BGR, H x W x 3)."""
+                      style: RenderStyle = RenderStyle(), supersample=None):
+    """Stands, surround, track surface, infield and lane lines (uint8 BGR, H x W x 3).
+
+    The large surfaces are filled with OpenCV's anti-aliasing.  Lane lines,
+    whose centres the benchmarks measure, get exact coverage: analytically for
+    the straight lines of an undistorted camera, otherwise on a
+    ``supersample`` times larger coverage mask that is area-averaged down
+    (OpenCV's own polygon anti-aliasing shifts thin lines by up to a quarter
+    pixel, which would bias every calibration benchmark).
+    """
+    s = int(style.supersample if supersample is None else supersample)
     w, h = camera.image_size
     img = np.empty((h, w, 3), np.uint8)
     img[:] = style.stands_bgr
@@ -137,8 +229,33 @@ def render_background(camera: Camera, track: TrackGeometry = STANDARD_TRACK,
     _fill(img, _project_polygon(camera, track.outer_outline(margin_m=1.5)), style.track_bgr)
     _fill(img, _project_polygon(camera, track.straight_surface(margin_m=1.5)), style.track_bgr)
     _fill(img, _project_polygon(camera, track.infield_outline()), style.infield_bgr)
-    for poly in lane_line_polygons(track):
-        _fill(img, _project_polygon(camera, poly), style.line_bgr)
+    alpha = np.zeros((h, w), np.float32)
+    if camera.has_distortion:
+        polys = lane_line_polygons(track)
+    else:
+        wide = _straight_lines_alpha(camera, track, alpha)
+        polys = lane_line_polygons(track, straights=wide)
+    projected = [p for p in (_project_polygon(camera, q) for q in polys) if p is not None]
+    if projected and s > 1:
+        allp = np.concatenate(projected)
+        x0, y0 = np.clip(np.floor(allp.min(0)).astype(int) - 2, 0, [w, h])
+        x1, y1 = np.clip(np.ceil(allp.max(0)).astype(int) + 3, 0, [w, h])
+        if x1 > x0 and y1 > y0:
+            cover = np.zeros(((y1 - y0) * s, (x1 - x0) * s), np.uint8)
+            for p in projected:
+                _fill(cover, p - [x0, y0], 255, s)
+            sub = cv2.resize(cover, (x1 - x0, y1 - y0), interpolation=cv2.INTER_AREA)
+            alpha[y0:y1, x0:x1] = np.maximum(alpha[y0:y1, x0:x1], sub.astype(np.float32) / 255.0)
+    elif projected:
+        for p in projected:
+            _fill(img, p, style.line_bgr)
+    ys, xs = np.nonzero(alpha)
+    if len(ys):
+        y0, y1, x0, x1 = ys.min(), ys.max() + 1, xs.min(), xs.max() + 1
+        a = alpha[y0:y1, x0:x1, None]
+        roi = img[y0:y1, x0:x1].astype(np.float32)
+        roi += a * (np.array(style.line_bgr, np.float32) - roi)
+        img[y0:y1, x0:x1] = np.round(roi).astype(np.uint8)
     return img
 
 

@@ -209,7 +209,7 @@ PRESETS = {
     "wide": _preset(None, distance_m=lambda r: _u(r, 15, 25), height_m=lambda r: _u(r, 4, 10),
                     athlete_height_px=lambda r: _u(r, 180, 260)),
     "high": _preset(None, height_m=lambda r: _u(r, 24, 30)),
-    "low": _preset(None, height_m=lambda r: _u(r, 3, 5)),
+    "low": _preset(None, height_m=lambda r: _u(r, 3, 5), distance_m=lambda r: _u(r, 15, 35)),
     "square": _preset(None, along_m=lambda r: _u(r, -1.0, 1.0), jitter_deg=0.002, follow_lag_s=0.05,
                       offset_frac=(0.0, 0.0)),
     "distorted": _preset(None, dist=lambda r: (_u(r, -0.12, -0.04), _u(r, 0.0, 0.05), 0.0, 0.0, 0.0),

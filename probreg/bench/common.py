@@ -19,6 +19,7 @@ __all__ = ["BENCHMARKS", "BenchReport", "run_benchmark", "md_table", "find_share
 BENCHMARKS = {
     "realism": "probreg.bench.realism:run",
     "synth-speed": "probreg.bench.synth_speed:run",
+    "registration": "probreg.bench.registration:run",
 }
 
 

@@ -12,6 +12,7 @@ from .clip import (
     write_json,
     write_keypoints_json,
 )
+from .frames import has_frames, iter_frames, read_frame
 
 __all__ = [
     "Clip",
@@ -24,4 +25,7 @@ __all__ = [
     "read_keypoints_json",
     "write_json",
     "write_keypoints_json",
+    "has_frames",
+    "iter_frames",
+    "read_frame",
 ]

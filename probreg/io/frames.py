@@ -1,0 +1,59 @@
+"""Frame access for a clip: an image folder or a video file, read through OpenCV."""
+
+from __future__ import annotations
+
+from pathlib import Path
+
+import cv2
+
+from .clip import Clip, ClipFormatError
+
+__all__ = ["iter_frames", "read_frame", "has_frames"]
+
+
+def has_frames(clip: Clip):
+    return bool(clip.frame_paths) or clip.video_path is not None
+
+
+def read_frame(clip: Clip, index):
+    """One frame (BGR uint8) or ``None`` when it is missing or unreadable."""
+    if clip.frame_paths:
+        if 0 <= index < len(clip.frame_paths):
+            return cv2.imread(str(clip.frame_paths[index]), cv2.IMREAD_COLOR)
+        return None
+    if clip.video_path is not None:
+        cap = cv2.VideoCapture(str(clip.video_path))
+        try:
+            cap.set(cv2.CAP_PROP_POS_FRAMES, index)
+            ok, img = cap.read()
+            return img if ok else None
+        finally:
+            cap.release()
+    return None
+
+
+def iter_frames(clip: Clip, n_frames=None):
+    """Yield ``(index, image or None)`` for every frame of the clip.
+
+    Raises
+    ------
+    ClipFormatError
+        If the clip has neither ``frames/`` nor ``video.mp4``, or the video cannot be opened.
+    """
+    n = clip.n_frames if n_frames is None else n_frames
+    if clip.frame_paths:
+        for i in range(n):
+            img = cv2.imread(str(clip.frame_paths[i]), cv2.IMREAD_COLOR) if i < len(clip.frame_paths) else None
+            yield i, img
+        return
+    if clip.video_path is None:
+        raise ClipFormatError(f"{Path(clip.path)}: no frames/ folder and no video.mp4")
+    cap = cv2.VideoCapture(str(clip.video_path))
+    if not cap.isOpened():
+        raise ClipFormatError(f"{clip.video_path}: cannot open the video")
+    try:
+        for i in range(n):
+            ok, img = cap.read()
+            yield i, (img if ok else None)
+    finally:
+        cap.release()

@@ -1,0 +1,205 @@
+"""Clip-level partial sports field registration: frames -> lanes -> families -> cameras.
+
+The broadcast camera is static over a clip, so one scalar (camera height by
+default) selects a family member in every frame.  This module runs lane
+detection over a clip, smooths the vanishing point over time, builds every
+frame's family, keeps lane-line indices consistent across frames and
+anchors them to the athlete's lane.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, replace
+
+import numpy as np
+
+from .calibration import CalibrationError, CalibrationFamily, SequenceCalibration
+from .camera import Camera
+from .io.clip import Clip
+from .io.frames import iter_frames
+from .lanes import FrameLanes, LaneDetectorConfig, smooth_vanishing_points, track_lanes, undistort_frame_lanes
+from .skeleton import JOINT_INDEX
+
+__all__ = [
+    "DEFAULT_HEIGHT_M",
+    "ANKLE_HEIGHT_M",
+    "ClipRegistration",
+    "athlete_ground_track",
+    "running_sign",
+    "register_frames",
+    "register_clip",
+]
+
+#: Height used when none is given and no posterior is available: the median of
+#: probreg's broadcast-camera height prior (see ``probreg.priors``).
+DEFAULT_HEIGHT_M = 12.0
+#: Typical ankle-joint-centre height above the ground (0.039 x stature, Winter 2009).
+ANKLE_HEIGHT_M = 0.07
+
+
+def athlete_ground_track(cameras, keypoints_px, ground_height_m=ANKLE_HEIGHT_M):
+    """Per-frame ground position (x, y) of the athlete: the mean of the ankles cast onto the
+    plane of the ankle height; NaN where a frame has no camera or no ankles."""
+    out = np.full((len(cameras), 2), np.nan)
+    if keypoints_px is None:
+        return out
+    ank = np.asarray(keypoints_px, float)[:, [JOINT_INDEX["l_ankle"], JOINT_INDEX["r_ankle"]], :2]
+    for i, cam in enumerate(cameras):
+        if cam is None or i >= len(ank):
+            continue
+        p = ank[i][np.all(np.isfinite(ank[i]), -1)]
+        if len(p):
+            g = cam.cast_to_ground(p, height_m=ground_height_m)[:, :2]
+            g = g[np.all(np.isfinite(g), -1)]
+            if len(g):
+                out[i] = g.mean(0)
+    return out
+
+
+def running_sign(cameras, keypoints_px):
+    """+1 if the athlete moves along +x of these cameras over the clip, -1 if along -x,
+    0 if it cannot be told (the camera is static, so ``x`` over time is meaningful)."""
+    g = athlete_ground_track(cameras, keypoints_px)
+    ok = np.all(np.isfinite(g), -1)
+    if ok.sum() < 5:
+        return 0
+    t = np.flatnonzero(ok)
+    slope = np.polyfit(t, g[ok, 0], 1)[0]
+    return int(np.sign(slope))
+
+
+@dataclass
+class ClipRegistration:
+    """Lanes and calibration families of every frame of a clip."""
+
+    frame_lanes: list
+    sequence: SequenceCalibration
+    forward_px: np.ndarray
+    image_size: tuple
+    lane_width_m: float = 1.22
+
+    def status_counts(self):
+        out = {}
+        for f in self.frame_lanes:
+            out[f.status] = out.get(f.status, 0) + 1
+        return out
+
+    def cameras(self, height_m, keypoints_px=None, athlete_lane=None, dist=None, branch="narrow",
+                undistort_iterations=2):
+        """Per-frame cameras (None where a frame has no lanes) of the member at ``height_m``.
+
+        With known distortion the lane support points are undistorted with the
+        member's focal length and the family is rebuilt, a few times (the
+        undistortion needs ``f``, ``f`` needs the lines).
+
+        Returns
+        -------
+        cameras : list of Camera or None
+        info : dict
+            ``line_offset`` (absolute index of observed line 0 after anchoring), ``consistency_m``.
+        """
+        if keypoints_px is not None and not getattr(self, "_oriented", False):
+            self.orient(height_m, keypoints_px, branch)
+        seq = self.sequence
+        if dist is not None and np.any(dist):
+            fams = list(seq.families)
+            for _ in range(undistort_iterations):
+                for i, (fl, fam) in enumerate(zip(self.frame_lanes, fams)):
+                    if fam is None:
+                        continue
+                    try:
+                        f = fam.member(height_m=height_m).focal_px
+                    except CalibrationError:
+                        continue
+                    ufl = undistort_frame_lanes(fl, dist, f)
+                    fams[i] = _family_or_none(ufl, self.forward_px, self.lane_width_m)
+            seq = SequenceCalibration(fams, self.image_size, self.lane_width_m)
+        seq.branch = branch
+        seq.harmonise_offsets(height_m)
+        extra = 0
+        if keypoints_px is not None:
+            # per frame: the athlete's feet must lie in one lane (the given one, or the
+            # clip's most common one); this fixes index slips that the camera's lateral
+            # position alone (an extrapolation far from the lines) cannot resolve
+            cams0 = seq.cameras_at_height(height_m)
+            track = athlete_ground_track(cams0, keypoints_px)
+            ok = np.all(np.isfinite(track), -1)
+            if ok.any():
+                w = self.lane_width_m
+                if athlete_lane is not None:
+                    centre = -w * (athlete_lane - 0.5)
+                else:
+                    lanes = np.floor(-track[ok, 1] / w)
+                    vals, cnt = np.unique(lanes, return_counts=True)
+                    centre = -w * (vals[np.argmax(cnt)] + 0.5)
+                shift = np.zeros(len(track), int)
+                shift[ok] = np.round((track[ok, 1] - centre) / w).astype(int)
+                # frames without feet keep the clip's most common shift
+                vals, cnt = np.unique(shift[ok], return_counts=True)
+                shift[~ok] = vals[np.argmax(cnt)]
+                seq.line_offsets = seq.line_offsets + shift
+        cams = seq.cameras_at_height(height_m, extra_offset=extra, dist=dist)
+        ys = np.array([c.C[1] for c in cams if c is not None])
+        info = {"line_offsets": (seq.line_offsets + extra).tolist(),
+                "consistency_m": float(1.4826 * np.median(np.abs(ys - np.median(ys)))) if len(ys) > 1 else float("nan")}
+        return cams, info
+
+
+    def orient(self, height_m, keypoints_px, branch="narrow"):
+        """Fix the running direction: lane lines cannot tell +x from -x, the athlete can.
+
+        Cameras at ``height_m`` with the current orientation put the athlete's
+        ground track moving along -x?  Then the families are rebuilt with the
+        opposite forward direction.
+        """
+        seq = self.sequence
+        seq.branch = branch
+        seq.harmonise_offsets(height_m)
+        if running_sign(seq.cameras_at_height(height_m), keypoints_px) < 0:
+            self.forward_px = -self.forward_px
+            fams = [_family_or_none(fl, self.forward_px, self.lane_width_m) for fl in self.frame_lanes]
+            self.sequence = SequenceCalibration(fams, self.image_size, self.lane_width_m)
+        self._oriented = True
+        return self
+
+
+def _family_or_none(fl: FrameLanes, forward_px, lane_width_m):
+    if not fl.ok:
+        return None
+    try:
+        return CalibrationFamily.from_frame_lanes(fl, forward_px=forward_px, lane_width_m=lane_width_m)
+    except CalibrationError:
+        return None
+
+
+def register_frames(frame_lanes, image_size, forward_px=(1.0, 0.0), lane_width_m=1.22, smooth=True):
+    """Families from already detected lanes (optionally VP-smoothed over time)."""
+    fls = smooth_vanishing_points(frame_lanes) if smooth else list(frame_lanes)
+    fams = [_family_or_none(fl, forward_px, lane_width_m) for fl in fls]
+    seq = SequenceCalibration(fams, tuple(image_size), lane_width_m)
+    return ClipRegistration(frame_lanes=fls, sequence=seq, forward_px=np.asarray(forward_px, float),
+                            image_size=tuple(image_size), lane_width_m=lane_width_m)
+
+
+def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(), smooth=True):
+    """Detect lanes in every frame of a clip and build the per-frame families.
+
+    Frames that cannot be read get status ``bad_image``; nothing raises for bad content.
+    """
+    fls = [replace(fl, image_size=clip.image_size) if fl.status == "bad_image" else fl
+           for fl in track_lanes(iter_frames(clip), config)]
+    return register_frames(fls, clip.image_size, (1.0, 0.0), clip.lane_width_m, smooth=smooth)
+
+
+def camera_json(cameras, height_m, n_frames, lo=None, hi=None):
+    """The ``camera.json`` document of CLIP_FORMAT (frames without a camera get nulls)."""
+    frames = []
+    for i in range(n_frames):
+        c: Camera | None = cameras[i] if i < len(cameras) else None
+        if c is None:
+            frames.append({"frame": i, "K": None, "R": None, "C": None, "dist": None, "fov_deg": None})
+        else:
+            frames.append({"frame": i, **c.to_dict()})
+    return {"height_m": {"median": height_m, "lo": height_m if lo is None else lo,
+                         "hi": height_m if hi is None else hi},
+            "frames": frames}
