@@ -82,6 +82,7 @@ class FamilyMember:
     y_m: float
     residual: float
     valid: bool
+    index_flipped: bool = False
 
     def camera(self, image_size, principal_point=None, line_offset=0, x_m=0.0, dist=None,
                lane_width_m=LANE_WIDTH_M):
@@ -279,7 +280,12 @@ class CalibrationFamily:
         m = self.members(np.array([float(focal_px)]))
         return FamilyMember(focal_px=float(focal_px), R=m["R"][0], height_m=float(m["height_m"][0]),
                             y_m=float(m["y_m"][0]), residual=float(m["residual"][0]),
-                            valid=bool(m["valid"][0]))
+                            valid=bool(m["valid"][0]), index_flipped=bool(m["index_flipped"][0]))
+
+    def oriented_indices(self, member: "FamilyMember"):
+        """Indices counted from the innermost observed line (0) outwards, for a member."""
+        k = self.indices.astype(int)
+        return k.max() - k if member.index_flipped else k
 
     def focal_range(self, fov_range_deg=(0.3, 150.0), n=120):
         """Focal lengths (log grid) over which the family exists, with their heights."""

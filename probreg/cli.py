@@ -72,6 +72,49 @@ def _cmd_demo(args):
     return 0
 
 
+def _parse_dist(text):
+    if text is None:
+        return None
+    try:
+        vals = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise CliError(f"--dist needs five comma-separated numbers k1,k2,p1,p2,k3, got {text!r}") from None
+    if len(vals) != 5:
+        raise CliError(f"--dist needs five numbers k1,k2,p1,p2,k3, got {len(vals)}")
+    return vals
+
+
+def _cmd_calibrate(args):
+    from .io.clip import atomic_output_dir, load_clip, write_json
+    from .io.frames import has_frames
+    from .registration import DEFAULT_HEIGHT_M, camera_json, register_clip
+
+    clip = load_clip(args.clip, min_score=args.min_score)
+    if not has_frames(clip):
+        raise CliError(f"{args.clip}: no frames/ folder or video.mp4 to find lane lines in")
+    dist = _parse_dist(args.dist)
+    height = args.height_m if args.height_m is not None else DEFAULT_HEIGHT_M
+    if not (height > 0):
+        raise CliError(f"--height-m must be positive, got {height}")
+    reg = register_clip(clip, smooth=not args.no_smooth)
+    cams, info = reg.cameras(height, clip.keypoints_px, clip.athlete_lane, dist=dist, branch=args.branch)
+    with atomic_output_dir(args.out, overwrite=True) as tmp:
+        write_json(tmp / "lanes.json", {"image_size": list(clip.image_size),
+                                       "frames": [dict(fl.to_dict(), frame=i, vp_px=fl.vp_px())
+                                                  for i, fl in enumerate(reg.frame_lanes)]})
+        write_json(tmp / "camera.json", camera_json(cams, height, clip.n_frames))
+        write_json(tmp / "calibration.json", {
+            "height_m": height, "height_source": "given" if args.height_m is not None else "default",
+            "branch": args.branch, "forward_px": reg.forward_px, "status_counts": reg.status_counts(),
+            "frame_status": info["frame_status"], "line_offsets": info["line_offsets"],
+            "consistency_m": info["consistency_m"], "dist": dist})
+    n_ok = sum(c is not None for c in cams)
+    print(f"calibrated {n_ok}/{clip.n_frames} frames at camera height {height:g} m "
+          f"({'given' if args.height_m is not None else 'default'}); lateral spread "
+          f"{info['consistency_m']:.3f} m -> {args.out}")
+    return 0
+
+
 def _cmd_bench(args):
     from .bench import BENCHMARKS, run_benchmark
 
@@ -117,6 +160,18 @@ def build_parser():
     d.add_argument("--frames", type=int, default=250)
     d.add_argument("--jobs", type=int, default=None)
     d.set_defaults(func=_cmd_demo)
+
+    c = sub.add_parser("calibrate", help="lanes -> vanishing point -> one-DOF camera family -> cameras")
+    c.add_argument("clip", type=Path)
+    c.add_argument("--out", type=Path, required=True)
+    c.add_argument("--height-m", type=float, default=None,
+                   help="camera height selecting the family member (default 12 m, the prior median)")
+    c.add_argument("--dist", default=None, help="known/hypothesised lens distortion k1,k2,p1,p2,k3 (write --dist=-0.1,0,0,0,0 when k1 < 0)")
+    c.add_argument("--branch", choices=("narrow", "wide"), default="narrow",
+                   help="which family member when a height occurs twice (default: zoomed-in)")
+    c.add_argument("--no-smooth", action="store_true", help="no temporal smoothing of the vanishing point")
+    c.add_argument("--min-score", type=float, default=0.3, help="keypoints below this score are missing")
+    c.set_defaults(func=_cmd_calibrate)
 
     b = sub.add_parser("bench", help="run a benchmark and write reports/bench_<name>.md")
     b.add_argument("name", nargs="?", help="benchmark name or 'all'")

@@ -70,8 +70,8 @@ class LaneDetectorConfig:
     merge_dist_px: float = 4.0
     profile_step_px: float = 8.0
     vp_inlier_deg: float = 0.35
-    curved_sagitta_px: float = 4.0
-    curved_sagitta_frac: float = 0.006
+    curved_sagitta_px: float = 0.8
+    curved_curvature_per_px: float = 3e-5
     min_lines: int = 3
     max_missing_lines: int = 2
     redetect_every: int = 10
@@ -92,14 +92,17 @@ class LaneLine:
     rms_px : float
         RMS distance of the support points from the line.
     index : int or None
-        Integer position across the track, 0 = innermost observed line
-        (set once the pencil is ordered).
+        Integer position across the track in the image order of the pencil
+        (set once the pencil is ordered; the calibration decides which end is the infield).
+    track_id : int or None
+        Identity of the physical line across the frames of a clip (:func:`track_lanes`).
     """
 
     line: np.ndarray
     points_px: np.ndarray
     rms_px: float
     index: int | None = None
+    track_id: int | None = None
 
     @property
     def endpoints_px(self):
@@ -322,16 +325,22 @@ def _robust_fit(points, iters=3):
     return line, keep
 
 
-def _sagitta(points, line):
-    """Largest deviation of a quadratic fit from the straight line (px): curvature measure."""
+def _sagitta(points, line, with_residual=False):
+    """Largest deviation of a quadratic fit from the straight line (px): curvature measure.
+
+    With ``with_residual`` also the RMS residual (px) of the quadratic fit: a
+    clean curve (a bend's arc) has a small one, clutter a large one.
+    """
     n = line[:2]
     d = np.array([-n[1], n[0]])
     t = points @ d
     r = points @ n + line[2]
     if np.ptp(t) < 1e-6:
-        return 0.0
+        return (0.0, 0.0) if with_residual else 0.0
     tt = (t - t.mean()) / (np.ptp(t) / 2)
     coef = np.polyfit(tt, r, 2)
+    if with_residual:
+        return abs(coef[0]), float(np.sqrt(np.mean((np.polyval(coef, tt) - r) ** 2)))
     return abs(coef[0])  # quadratic term at the ends of the support
 
 
@@ -520,10 +529,11 @@ def detect_lanes(image_bgr, config: LaneDetectorConfig = LaneDetectorConfig(), f
         return FrameLanes(status="no_lines", image_size=size, frame=frame, extra={"mask_px": n_mask})
     candidates = []
     n_curved = 0
-    candidates, n_curved = _measure_candidates(image_bgr, _merge_segments(segs, config), config)
+    candidates, (n_curved, curved_len) = _measure_candidates(image_bgr, _merge_segments(segs, config), config)
     # merge candidates that turned out to be the same line after re-measurement
     candidates = _dedupe(candidates, config)
-    fl = FrameLanes(status="no_lines", image_size=size, frame=frame, n_curved=n_curved)
+    fl = FrameLanes(status="no_lines", image_size=size, frame=frame, n_curved=n_curved,
+                    extra={"curved_length_px": curved_len})
     if len(candidates) < 2:
         return replace(fl, status="no_straight" if n_curved >= 2 else
                        ("too_few_lines" if candidates or n_curved else "no_lines"))
@@ -535,9 +545,12 @@ def detect_lanes(image_bgr, config: LaneDetectorConfig = LaneDetectorConfig(), f
 
 
 def _measure_candidates(image_bgr, endpoint_sets, config):
-    """Sub-pixel measurement of rough lines (longest first); curved ones are counted, not kept."""
+    """Sub-pixel measurement of rough lines (longest first); curved ones are counted, not kept.
+
+    Returns the candidates ``(line, points, length)`` and ``(number, total length)`` of curved ones.
+    """
     candidates, measured = [], []
-    n_curved = 0
+    n_curved, curved_length = 0, 0.0
     for ep in sorted(endpoint_sets, key=lambda e: -np.ptp(e, axis=0).max()):
         # a cluster lying on an already measured line is a duplicate: skip the costly profiles
         if any(np.max(np.abs(ep @ m[:2] + m[2])) < 3.0 for m in measured):
@@ -550,12 +563,17 @@ def _measure_candidates(image_bgr, endpoint_sets, config):
         if len(pts) < 6:
             continue
         length = np.ptp(pts @ np.array([-line[1], line[0]]))
-        if _sagitta(pts, line) > max(config.curved_sagitta_px, config.curved_sagitta_frac * length):
-            n_curved += 1
+        sag, quad_rms = _sagitta(pts, line, with_residual=True)
+        # a bend's arc curves far more than lens distortion bends a lane line
+        # (curvature ~ 8 sagitta / length^2: bends >= 4e-5 / px, distorted straight lines <= 2e-5)
+        if sag > config.curved_sagitta_px and 8 * sag / length**2 > config.curved_curvature_per_px:
+            if quad_rms < 0.35 and length > 150:  # a clean arc is bend evidence; clutter is not
+                n_curved += 1
+                curved_length += length
             continue
         candidates.append((line, pts, length))
         measured.append(line)
-    return candidates, n_curved
+    return candidates, (n_curved, curved_length)
 
 
 def _image_chord(line, image_size):
@@ -599,24 +617,88 @@ def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig()):
     list of FrameLanes
     """
     out = []
-    prev = None
+    prev = last_ok = None
+    next_id = 0
+    prev_small = window = None
     for k, (i, img) in enumerate(frames):
         fl = None
-        if prev is not None and prev.ok and img is not None and k % max(config.redetect_every, 1):
+        shift = np.zeros(2)
+        small = None
+        if img is not None and getattr(img, "ndim", 0) == 3 and img.size:
+            # global image motion from the previous frame (phase correlation of a small grey
+            # copy): predicts where the lines went when the camera pans or shakes
+            scale = 320.0 / img.shape[1]
+            small = cv2.resize(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY),
+                               (320, max(8, int(round(img.shape[0] * scale)))),
+                               interpolation=cv2.INTER_AREA).astype(np.float32)
+            if prev_small is not None and prev_small.shape == small.shape:
+                if window is None or window.shape != small.shape:
+                    window = cv2.createHanningWindow(small.shape[::-1], cv2.CV_32F)
+                (dx, dy), resp = cv2.phaseCorrelate(prev_small, small, window)
+                if resp > 0.05:
+                    shift = np.array([dx, dy]) / scale
+        if prev is not None and prev.ok and small is not None and k % max(config.redetect_every, 1):
             size = (img.shape[1], img.shape[0])
-            chords = [c for c in (_image_chord(ln.line, size) for ln in prev.lines) if c is not None]
-            cands, n_curved = _measure_candidates(img, chords, config)
+            chords = [c for c in (_image_chord(_translate(ln.line, shift), size) for ln in prev.lines)
+                      if c is not None]
+            cands, (n_curved, curved_len) = _measure_candidates(img, chords, config)
             if len(cands) >= max(config.min_lines, len(prev.lines) - 1):
                 fl = _pencil_from_candidates(_dedupe(cands, config),
                                              FrameLanes(status="no_lines", image_size=size, frame=i,
-                                                        n_curved=n_curved), config)
+                                                        n_curved=n_curved,
+                                                        extra={"curved_length_px": curved_len}), config)
                 if not fl.ok or len(fl.lines) < len(prev.lines) - 1:
                     fl = None
         if fl is None:
             fl = detect_lanes(img, config, frame=i)
+        if fl.ok:
+            ref = prev if prev is not None else last_ok
+            fl, next_id = _assign_track_ids(fl, ref, next_id, shift if ref is prev else np.zeros(2))
+            last_ok = fl
         out.append(fl)
         prev = fl if fl.ok else None
+        prev_small = small
     return out
+
+
+def _translate(line, shift):
+    """The image line moved by ``shift`` (px)."""
+    return np.array([line[0], line[1], line[2] - line[0] * shift[0] - line[1] * shift[1]])
+
+
+def _assign_track_ids(fl, ref, next_id, shift=(0.0, 0.0)):
+    """Give each line of ``fl`` the id of the line of ``ref`` it continues (new ids otherwise).
+
+    Both frames' lines are ordered across the track, so the correspondence is
+    an index shift: the shift with the smallest mean distance between matched
+    lines wins if that distance is well below the spacing of neighbouring
+    lines (the camera moves by less than half a lane between frames).
+    """
+    ids = [None] * len(fl.lines)
+    if ref is not None and ref.ok and len(ref.lines) >= 2:
+        ref_lines = [_translate(r.line, shift) for r in ref.lines]
+        D = np.array([[np.median(np.abs(ln.points_px @ r[:2] + r[2])) for r in ref_lines]
+                      for ln in fl.lines])
+        spacing = np.median([np.median(np.abs(a.points_px @ b.line[:2] + b.line[2]))
+                             for a, b in zip(ref.lines[:-1], ref.lines[1:])])
+        best, best_cost = None, np.inf
+        n, m = D.shape
+        for shift in range(-(n - 1), m):
+            pairs = [(k, k + shift) for k in range(n) if 0 <= k + shift < m]
+            if len(pairs) < min(2, n, m):
+                continue
+            cost = float(np.mean([D[k, j] for k, j in pairs]))
+            if cost < best_cost:
+                best, best_cost = pairs, cost
+        if best is not None and best_cost < 0.35 * spacing:
+            for k, j in best:
+                ids[k] = ref.lines[j].track_id
+    for k in range(len(ids)):
+        if ids[k] is None:
+            ids[k] = next_id
+            next_id += 1
+    lines = tuple(replace(ln, track_id=i) for ln, i in zip(fl.lines, ids))
+    return replace(fl, lines=lines), next_id
 
 
 def _undistort_px(points_px, dist, focal_px, image_size):
@@ -663,11 +745,24 @@ def _pencil_from_candidates(cands, fl, cfg):
         status = "no_straight" if fl.n_curved >= 2 and len(best[1]) < 2 else "too_few_lines"
         return replace(fl, status=status)
     vp, inl = best
+    if fl.extra.get("curved_length_px", 0.0) > lengths[inl].sum():
+        # more curved line evidence than straight: a bend, whose short chords can mimic a pencil
+        return replace(fl, status="no_straight")
     sets = [cands[k][1] for k in inl]
     v_unit, cov, sigma = _refine_vp(sets, _to_unit(vp, size), size)
     lines_px, res = lines_through_point(sets, v_unit, size)
     coord = _pencil_coordinate(lines_px, v_unit, size)
     order = np.argsort(coord)
+    # canonical direction (the sign of the homogeneous vanishing point is arbitrary, so the
+    # angular order may run either way): the first line is the one nearer the image top
+    # (or, for near-vertical lines, the left edge) where it passes the image centre
+    c0 = np.array([(size[0] - 1) / 2, (size[1] - 1) / 2, 1.0])
+    nrm = lines_px[:, :2].mean(0)
+    nrm = nrm * (1 if (abs(nrm[1]) >= abs(nrm[0]) and nrm[1] > 0) or
+                 (abs(nrm[1]) < abs(nrm[0]) and nrm[0] > 0) else -1)
+    offs = -(lines_px @ c0) * np.sign(lines_px[:, :2] @ nrm)  # signed position along nrm
+    if offs[order[-1]] < offs[order[0]]:
+        order = order[::-1]
     idx, spacing = assign_line_indices(coord[order], cfg.max_missing_lines)
     lanes = tuple(LaneLine(line=lines_px[o], points_px=sets[o], rms_px=float(np.sqrt(np.mean(res[o] ** 2))),
                            index=int(k)) for o, k in zip(order, idx))

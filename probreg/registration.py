@@ -38,8 +38,8 @@ ANKLE_HEIGHT_M = 0.07
 
 
 def athlete_ground_track(cameras, keypoints_px, ground_height_m=ANKLE_HEIGHT_M):
-    """Per-frame ground position (x, y) of the athlete: the mean of the ankles cast onto the
-    plane of the ankle height; NaN where a frame has no camera or no ankles."""
+    """Per-frame ground position (x, y) of the athlete from the ankle nearest the camera cast
+    onto the plane of the ankle height; NaN where a frame has no camera or no ankles."""
     out = np.full((len(cameras), 2), np.nan)
     if keypoints_px is None:
         return out
@@ -49,10 +49,12 @@ def athlete_ground_track(cameras, keypoints_px, ground_height_m=ANKLE_HEIGHT_M):
             continue
         p = ank[i][np.all(np.isfinite(ank[i]), -1)]
         if len(p):
-            g = cam.cast_to_ground(p, height_m=ground_height_m)[:, :2]
+            g = cam.cast_to_ground(p, height_m=ground_height_m)
             g = g[np.all(np.isfinite(g), -1)]
             if len(g):
-                out[i] = g.mean(0)
+                # the ankle nearest the camera: a swinging ankle, cast onto the plane of
+                # the ankle height, lands beyond the athlete
+                out[i] = g[np.argmin(np.linalg.norm(g - cam.C, axis=1)), :2]
     return out
 
 
@@ -115,35 +117,58 @@ class ClipRegistration:
                     fams[i] = _family_or_none(ufl, self.forward_px, self.lane_width_m)
             seq = SequenceCalibration(fams, self.image_size, self.lane_width_m)
         seq.branch = branch
-        seq.harmonise_offsets(height_m)
+        seq.line_offsets = self._track_offsets(seq, height_m)
         extra = 0
         if keypoints_px is not None:
-            # per frame: the athlete's feet must lie in one lane (the given one, or the
-            # clip's most common one); this fixes index slips that the camera's lateral
-            # position alone (an extrapolation far from the lines) cannot resolve
-            cams0 = seq.cameras_at_height(height_m)
-            track = athlete_ground_track(cams0, keypoints_px)
+            # one constant for the clip: the athlete's feet lie in one lane (the given one,
+            # or the clip's most common one)
+            track = athlete_ground_track(seq.cameras_at_height(height_m), keypoints_px)
             ok = np.all(np.isfinite(track), -1)
             if ok.any():
                 w = self.lane_width_m
-                if athlete_lane is not None:
-                    centre = -w * (athlete_lane - 0.5)
-                else:
-                    lanes = np.floor(-track[ok, 1] / w)
-                    vals, cnt = np.unique(lanes, return_counts=True)
-                    centre = -w * (vals[np.argmax(cnt)] + 0.5)
-                shift = np.zeros(len(track), int)
-                shift[ok] = np.round((track[ok, 1] - centre) / w).astype(int)
-                # frames without feet keep the clip's most common shift
-                vals, cnt = np.unique(shift[ok], return_counts=True)
-                shift[~ok] = vals[np.argmax(cnt)]
-                seq.line_offsets = seq.line_offsets + shift
+                y = float(np.median(track[ok, 1]))
+                lane = athlete_lane if athlete_lane is not None else int(np.floor(-y / w)) + 1
+                extra = int(np.round((y + w * (lane - 0.5)) / w))
         cams = seq.cameras_at_height(height_m, extra_offset=extra, dist=dist)
+        status = [fl.status for fl in self.frame_lanes]
+        for i, c in enumerate(cams):
+            if c is None and status[i] == "ok":
+                status[i] = "no_member"
+        for i in _zoom_outliers(cams):
+            cams[i] = None
+            status[i] = "inconsistent"
         ys = np.array([c.C[1] for c in cams if c is not None])
-        info = {"line_offsets": (seq.line_offsets + extra).tolist(),
+        info = {"line_offsets": (seq.line_offsets + extra).tolist(), "frame_status": status,
                 "consistency_m": float(1.4826 * np.median(np.abs(ys - np.median(ys)))) if len(ys) > 1 else float("nan")}
         return cams, info
 
+
+    def _track_offsets(self, seq, height_m):
+        """Per-frame line-index offsets that give every physical line (``track_id``) one
+        absolute index over the clip; frames that share no line with the previous ones fall
+        back to the camera's lateral position."""
+        members = seq.members_at_height(height_m)
+        offsets = np.zeros(len(members), int)
+        known = {}  # track id -> absolute index
+        prev_y = None
+        for t, (fl, fam, m) in enumerate(zip(self.frame_lanes, seq.families, members)):
+            if fam is None or m is None:
+                continue
+            k = fam.oriented_indices(m)
+            ids = [ln.track_id for ln in fl.lines]
+            common = [(kk, known[i]) for kk, i in zip(k, ids) if i is not None and i in known]
+            if common:
+                off = int(np.median([a - kk for kk, a in common]))
+            elif prev_y is not None:
+                off = int(np.round((m.y_m - prev_y) / self.lane_width_m))
+            else:
+                off = 0
+            offsets[t] = off
+            for kk, i in zip(k, ids):
+                if i is not None:
+                    known[i] = kk + off
+            prev_y = m.y_m - self.lane_width_m * off
+        return offsets
 
     def orient(self, height_m, keypoints_px, branch="narrow"):
         """Fix the running direction: lane lines cannot tell +x from -x, the athlete can.
@@ -154,13 +179,26 @@ class ClipRegistration:
         """
         seq = self.sequence
         seq.branch = branch
-        seq.harmonise_offsets(height_m)
+        seq.line_offsets = self._track_offsets(seq, height_m)
         if running_sign(seq.cameras_at_height(height_m), keypoints_px) < 0:
             self.forward_px = -self.forward_px
             fams = [_family_or_none(fl, self.forward_px, self.lane_width_m) for fl in self.frame_lanes]
             self.sequence = SequenceCalibration(fams, self.image_size, self.lane_width_m)
         self._oriented = True
         return self
+
+
+def _zoom_outliers(cameras, half_window=12, rel_tol=0.02, n_sigma=6.0):
+    """Frames whose focal length leaves the clip's smooth zoom path (running median)."""
+    f = np.array([np.log(c.focal_px) if c is not None else np.nan for c in cameras])
+    ok = np.flatnonzero(np.isfinite(f))
+    if len(ok) < 5:
+        return []
+    med = np.array([np.median(f[ok[max(0, j - half_window):j + half_window + 1]]) for j in range(len(ok))])
+    res = f[ok] - med
+    sigma = 1.4826 * np.median(np.abs(res))
+    bad = np.abs(res) > max(n_sigma * sigma, np.log1p(rel_tol))
+    return [int(i) for i in ok[bad]]
 
 
 def _family_or_none(fl: FrameLanes, forward_px, lane_width_m):

@@ -1,0 +1,139 @@
+"""Lane detection, vanishing points, statuses, tracking and round trips on rendered frames."""
+
+import cv2
+import numpy as np
+import pytest
+
+from probreg.calibration import CalibrationFamily
+from probreg.camera import Camera
+from probreg.lanes import (
+    LaneDetectorConfig,
+    assign_line_indices,
+    detect_lanes,
+    smooth_vanishing_points,
+    track_lanes,
+)
+from probreg.render import RenderStyle, finish_image, render_background
+
+
+def _true_line(cam, i):
+    P = cam.projection_matrix
+    y = -1.22 * i
+    line = np.cross(P @ [0, y, 0, 1.0], P @ [1, y, 0, 1.0])
+    return line / np.hypot(line[0], line[1])
+
+
+def _render(cam, rng=None):
+    img = render_background(cam)
+    if rng is not None:
+        img = finish_image(img, rng)
+        ok, buf = cv2.imencode(".jpg", img, [cv2.IMWRITE_JPEG_QUALITY, 90])
+        img = cv2.imdecode(buf, cv2.IMREAD_COLOR)
+    return img
+
+
+@pytest.fixture(scope="module")
+def cam():
+    return Camera.look_at([42, -62, 13], [35, -4, 0.5], fov_deg=14.0, roll_deg=0.8)
+
+
+def test_lines_and_vanishing_point_known_answer(cam):
+    fl = detect_lanes(_render(cam, np.random.default_rng(1)))
+    assert fl.status == "ok" and len(fl.lines) >= 6
+    true = [_true_line(cam, i) for i in range(9)]
+    for ln in fl.lines:
+        d = min(np.mean(np.abs(ln.endpoints_px @ t[:2] + t[2])) for t in true)
+        assert d < 0.3
+    r_est = np.linalg.solve(cam.K, fl.vanishing_point)
+    ang = np.degrees(np.arccos(abs(r_est @ cam.R[:, 0]) / np.linalg.norm(r_est)))
+    assert ang < 0.1
+    assert fl.vp_cov.shape == (3, 3) and np.all(np.isfinite(fl.vp_cov))
+    assert list(fl.indices) == list(range(len(fl.lines)))
+
+
+def test_round_trip_camera_lines_family_camera(cam):
+    fl = detect_lanes(_render(cam, np.random.default_rng(2)))
+    fam = CalibrationFamily.from_frame_lanes(fl)
+    m = fam.member(height_m=cam.C[2])
+    assert abs(m.camera(cam.image_size).fov_deg - cam.fov_deg) < 0.1
+    assert abs(abs(m.y_m - 1.22 * 0) - abs(cam.C[1] + 1.22 * 0)) < 0.02 * 62 + 1.22 * 9
+
+
+def test_vanishing_point_at_infinity_is_ordinary():
+    square = Camera.look_at([40, -50, 10], [40, -4, 0.0], fov_deg=10.0)
+    fl = detect_lanes(_render(square))
+    assert fl.ok
+    v = fl.vanishing_point / np.linalg.norm(fl.vanishing_point)
+    assert abs(v[2]) < 1e-4  # homogeneous w ~ 0: at infinity
+    m = CalibrationFamily.from_frame_lanes(fl).member(height_m=10.0)
+    assert abs(m.camera(square.image_size).fov_deg - 10.0) < 0.05
+
+
+def test_missing_middle_line_found_from_spacing():
+    cam = Camera.look_at([20, -45, 16], [25, -4, 0], fov_deg=25.0)
+    img = np.full((1080, 1920, 3), (62, 72, 182), np.uint8)
+    for i in (0, 1, 2, 4, 5, 6):
+        p = cam.project([[0.0, -1.22 * i, 0], [60.0, -1.22 * i, 0]])
+        cv2.line(img, tuple(int(v) for v in p[0]), tuple(int(v) for v in p[1]), (238, 238, 238), 3, cv2.LINE_AA)
+    fl = detect_lanes(img)
+    assert fl.ok and len(fl.lines) == 6
+    assert sorted(fl.indices) in ([0, 1, 2, 4, 5, 6], [0, 1, 2, 3, 5, 6])  # the gap, seen from either end
+    assert fl.spacing_residual_px < 2.0
+
+
+def test_assign_indices_gap_needs_clear_evidence():
+    k = np.array([0, 1, 2, 3])
+    t = 0.3 + 0.05 * k  # equally spaced pencil coordinates: no gap
+    idx, res = assign_line_indices(t)
+    assert list(idx) == [0, 1, 2, 3] and res < 1e-9
+    idx3, res3 = assign_line_indices(t[:3])
+    assert list(idx3) == [0, 1, 2] and np.isnan(res3)
+
+
+def test_status_no_lines_and_bad_image():
+    red = np.full((720, 1280, 3), (62, 72, 182), np.uint8)
+    assert detect_lanes(red).status == "no_lines"
+    assert detect_lanes(None).status == "bad_image"
+    assert detect_lanes(np.zeros((0, 0, 3), np.uint8)).status == "bad_image"
+
+
+def test_status_too_few_lines():
+    img = np.full((720, 1280, 3), (62, 72, 182), np.uint8)
+    cv2.line(img, (0, 300), (1279, 330), (238, 238, 238), 3)
+    cv2.line(img, (0, 400), (1279, 450), (238, 238, 238), 3)
+    assert detect_lanes(img).status == "too_few_lines"
+
+
+def test_status_no_straight_when_only_a_bend_is_seen():
+    bend = Camera.look_at([175, 36.5, 14], [124, 36.5, 0], fov_deg=14.0)
+    fl = detect_lanes(render_background(bend))
+    assert fl.status == "no_straight"
+
+
+def test_tracking_keeps_line_identities_and_smoothing_keeps_statuses(cam):
+    rng = np.random.default_rng(4)
+    frames = []
+    for k in range(6):
+        c = Camera.look_at([42, -62, 13], [35 + 0.3 * k, -4, 0.5], fov_deg=14.0, roll_deg=0.8)
+        frames.append((k, _render(c, rng)))
+    fls = track_lanes(frames, LaneDetectorConfig(redetect_every=4))
+    assert all(f.ok for f in fls)
+    ids0 = [ln.track_id for ln in fls[0].lines]
+    for f in fls[1:]:
+        assert len(set(ln.track_id for ln in f.lines) & set(ids0)) >= len(ids0) - 1
+    sm = smooth_vanishing_points(fls + [detect_lanes(None)])
+    assert [f.status for f in sm] == [f.status for f in fls] + ["bad_image"]
+    assert "vp_raw" in sm[0].extra
+
+
+def test_paper_frames_give_three_lines_and_a_family(shared_data):
+    frames = sorted((shared_data / "paper_frames").glob("*.jpeg"))
+    assert len(frames) == 14
+    for p in frames:
+        fl = detect_lanes(cv2.imread(str(p)))
+        assert fl.ok and len(fl.lines) >= 3, p.name
+        CalibrationFamily.from_frame_lanes(fl).member(height_m=8.0)
+
+
+def test_render_style_default_is_supersampled():
+    assert RenderStyle().supersample >= 4

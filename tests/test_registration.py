@@ -1,0 +1,79 @@
+"""Clip-level registration and the `probreg calibrate` command."""
+
+import json
+
+import numpy as np
+
+from probreg.cli import main
+from probreg.io import load_clip, load_groundtruth, read_cameras_json
+from probreg.registration import register_clip
+
+
+def test_registration_at_true_height_matches_groundtruth(small_clip):
+    clip = load_clip(small_clip)
+    gt = load_groundtruth(small_clip)
+    reg = register_clip(clip)
+    h = gt.cameras[0].C[2]
+    cams, info = reg.cameras(h, clip.keypoints_px, clip.athlete_lane, dist=gt.cameras[0].dist)
+    got = [(c, g) for c, g in zip(cams, gt.cameras) if c is not None]
+    assert len(got) >= 36
+    fov_err = np.array([abs(c.fov_deg - g.fov_deg) for c, g in got])
+    loc_err = np.array([np.linalg.norm((c.C - g.C)[1:]) for c, g in got])
+    dist = np.linalg.norm(gt.cameras[0].C[:2] - gt.joints3d_track_m[0, 0, :2])
+    assert np.median(fov_err) < 0.1
+    assert np.median(loc_err) < 0.01 * dist          # lateral position incl. the right lane index
+    assert len(info["frame_status"]) == clip.n_frames
+
+
+def test_calibrate_command_writes_format(small_clip, tmp_path):
+    gt = load_groundtruth(small_clip)
+    out = tmp_path / "cal"
+    dist = ",".join(f"{v:.6f}" for v in gt.cameras[0].dist)
+    assert main(["calibrate", str(small_clip), "--out", str(out), "--height-m", f"{gt.cameras[0].C[2]:.4f}",
+                 f"--dist={dist}"]) == 0
+    doc = json.loads((out / "camera.json").read_text())
+    assert set(doc["height_m"]) == {"median", "lo", "hi"}
+    assert len(doc["frames"]) == 40 and "fov_deg" in doc["frames"][0]
+    cams = read_cameras_json(out / "camera.json")
+    assert sum(c is not None for c in cams.values()) >= 36
+    lanes = json.loads((out / "lanes.json").read_text())
+    assert lanes["frames"][0]["status"] == "ok" and len(lanes["frames"][0]["lines"]) >= 3
+    cal = json.loads((out / "calibration.json").read_text())
+    assert cal["height_source"] == "given"
+
+
+def test_calibrate_without_height_uses_documented_default(small_clip, tmp_path):
+    out = tmp_path / "cal"
+    assert main(["calibrate", str(small_clip), "--out", str(out)]) == 0
+    cal = json.loads((out / "calibration.json").read_text())
+    assert cal["height_source"] == "default" and cal["height_m"] == 12.0
+
+
+def test_calibrate_bad_input(tmp_path, capsys):
+    assert main(["calibrate", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
+    assert "not found" in capsys.readouterr().err
+    clip = tmp_path / "noframes"
+    clip.mkdir()
+    (clip / "clip.json").write_text('{"fps": 50, "image_size": [1920, 1080], "n_frames": 3}')
+    assert main(["calibrate", str(clip), "--out", str(tmp_path / "o")]) == 2
+    assert "no frames" in capsys.readouterr().err
+    assert main(["calibrate", str(clip), "--out", str(tmp_path / "o"), "--dist", "1,2"]) == 2
+
+
+def test_frames_without_lanes_get_a_status_not_a_crash(small_clip, tmp_path):
+    import shutil
+
+    import cv2
+
+    clip_dir = tmp_path / "clip"
+    shutil.copytree(small_clip, clip_dir)
+    for i in (5, 6, 7):  # blank frames: no lanes
+        p = clip_dir / "frames" / f"{i:06d}.jpg"
+        cv2.imwrite(str(p), np.full((1080, 1920, 3), 90, np.uint8))
+    (clip_dir / "frames" / "000009.jpg").write_bytes(b"not a jpeg")
+    out = tmp_path / "cal"
+    assert main(["calibrate", str(clip_dir), "--out", str(out)]) == 0
+    cal = json.loads((out / "calibration.json").read_text())
+    assert [cal["frame_status"][i] for i in (5, 6, 7, 9)] == ["no_lines"] * 3 + ["bad_image"]
+    cams = json.loads((out / "camera.json").read_text())["frames"]
+    assert cams[5]["K"] is None and cams[0]["K"] is not None
