@@ -366,13 +366,29 @@ class FamilyParameter(ABC):
         if branch not in ("narrow", "wide"):
             raise CalibrationError(f"branch must be 'narrow' or 'wide', got {branch!r}")
         i = cross[-1] if branch == "narrow" else cross[0]
+        # refine the bracket on finer log grids (vectorised evaluations), then interpolate
+        lo, hi = np.log(f[i]), np.log(f[i + 1])
+        for _ in range(3):
+            grid = np.linspace(lo, hi, 17)
+            fx = np.exp(grid)
+            mm = family.members(fx)
+            d = np.where(mm["valid"], self.values(family, fx, mm), np.nan) - value
+            ok = np.isfinite(d)
+            c = np.flatnonzero(ok[:-1] & ok[1:] & (np.sign(d[:-1]) != np.sign(d[1:])))
+            if len(c) == 0:
+                break
+            j = c[-1] if branch == "narrow" else c[0]
+            lo, hi = grid[j], grid[j + 1]
+            d_lo, d_hi = d[j], d[j + 1]
+        else:
+            return float(np.exp(lo + (hi - lo) * d_lo / (d_lo - d_hi)))
 
         def fn(logf):
             fx = np.exp(logf)
             mm = family.members(np.array([fx]))
             return float(self.values(family, np.array([fx]), mm)[0] - value)
 
-        return float(np.exp(brentq(fn, np.log(f[i]), np.log(f[i + 1]), xtol=1e-13, rtol=1e-13)))
+        return float(np.exp(brentq(fn, lo, hi, xtol=1e-13, rtol=1e-13)))
 
 
 class HeightParameter(FamilyParameter):

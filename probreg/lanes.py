@@ -269,36 +269,48 @@ def _merge_segments(segs, cfg):
     return [np.concatenate(c[1]) for c in clusters]
 
 
-def _measure_line(image_bgr, endpoints, cfg):
-    """Sub-pixel centre points along a rough line via perpendicular intensity profiles."""
-    line = _fit_line(endpoints)
-    n = line[:2]
-    d = np.array([-n[1], n[0]])
-    t = endpoints @ d
-    t0, t1 = t.min(), t.max()
-    foot = -line[2] * n
-    ts = np.arange(t0, t1, cfg.profile_step_px)
-    if len(ts) < 4:
-        return None
+def _measure_lines(image_bgr, endpoint_sets, cfg):
+    """Sub-pixel centre points along rough lines via perpendicular intensity profiles.
+
+    All lines' profiles are sampled in one ``cv2.remap`` call and processed
+    together; returns one (N_i, 2) array (or None when too little is seen) per line.
+    """
     half = 10.0
     offs = np.arange(-half, half + 0.25, 0.5)
-    pts = foot + ts[:, None] * d
-    grid = pts[:, None, :] + offs[None, :, None] * n
-    mx = grid[..., 0].astype(np.float32)
-    my = grid[..., 1].astype(np.float32)
+    starts, normals, samples = [], [], []
+    for endpoints in endpoint_sets:
+        line = _fit_line(np.asarray(endpoints, float))
+        n = line[:2]
+        d = np.array([-n[1], n[0]])
+        t = endpoints @ d
+        ts = np.arange(t.min(), t.max(), cfg.profile_step_px)
+        pts = -line[2] * n + ts[:, None] * d
+        starts.append(len(pts))
+        normals.append(np.repeat(n[None], len(pts), 0))
+        samples.append(pts)
+    if not samples or sum(starts) == 0:
+        return [None] * len(starts)
+    pts = np.concatenate(samples)
+    nrm = np.concatenate(normals)
+    grid = pts[:, None, :] + offs[None, :, None] * nrm[:, None, :]
+    mx = np.ascontiguousarray(grid[..., 0], dtype=np.float32)
+    my = np.ascontiguousarray(grid[..., 1], dtype=np.float32)
     # per-pixel minimum over B, G, R of the bilinearly sampled profile (white = bright in all)
     rgb = cv2.remap(image_bgr, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
-    prof = np.minimum(np.minimum(rgb[..., 0], rgb[..., 1]), rgb[..., 2]).astype(float)
+    prof = np.minimum(np.minimum(rgb[..., 0], rgb[..., 1]), rgb[..., 2]).astype(np.float32)
     # background level per side of the peak: the two sides may differ (infield vs track)
     am = np.argmax(prof, axis=1)
     cols = np.arange(len(offs))[None, :]
-    base = np.where(cols < am[:, None], prof[:, :4].mean(1)[:, None], prof[:, -4:].mean(1)[:, None])
+    left_bg = prof[:, :4].mean(1)[:, None]
+    right_bg = prof[:, -4:].mean(1)[:, None]
+    base = np.where(cols < am[:, None], left_bg, right_bg)
     # weights ~ line coverage on both sides: normalise by the contrast on each side
     top = prof.max(axis=1)[:, None]
-    peak = (top - np.minimum(prof[:, :4].mean(1), prof[:, -4:].mean(1))[:, None])[:, 0]
+    peak = (top - np.minimum(left_bg, right_bg))[:, 0]
     wts = np.clip((prof - base) / np.maximum(top - base, 1e-6), 0, None) * peak[:, None]
+    h, w = image_bgr.shape[:2]
     valid = (peak > cfg.threshold * 0.6) & (mx.min(1) >= 0) & (my.min(1) >= 0) \
-        & (mx.max(1) <= image_bgr.shape[1] - 1) & (my.max(1) <= image_bgr.shape[0] - 1)
+        & (mx.max(1) <= w - 1) & (my.max(1) <= h - 1)
     # centroid over the contiguous run around the peak only (a neighbouring line, or the
     # brighter of two differently coloured backgrounds, must not pull it; a hard half-peak
     # cut would bias thin, anti-aliased lines)
@@ -306,10 +318,18 @@ def _measure_line(image_bgr, endpoints, cfg):
     left = np.where(low & (cols < am[:, None]), cols, -1).max(1)
     right = np.where(low & (cols > am[:, None]), cols, len(offs)).min(1)
     wts = np.where((cols > left[:, None]) & (cols < right[:, None]), wts, 0.0)
-    if valid.sum() < 4:
-        return None
-    off = (wts[valid] * offs).sum(1) / wts[valid].sum(1)
-    return pts[valid] + off[:, None] * n
+    with np.errstate(invalid="ignore", divide="ignore"):
+        off = (wts * offs).sum(1) / wts.sum(1)
+    centre = pts + off[:, None] * nrm
+    out = []
+    for sl_pts, sl_ok in zip(np.split(centre, np.cumsum(starts)[:-1]), np.split(valid, np.cumsum(starts)[:-1])):
+        out.append(sl_pts[sl_ok] if sl_ok.sum() >= 4 else None)
+    return out
+
+
+def _measure_line(image_bgr, endpoints, cfg):
+    """Sub-pixel centre points along one rough line (see :func:`_measure_lines`)."""
+    return _measure_lines(image_bgr, [endpoints], cfg)[0]
 
 
 def _robust_fit(points, iters=3):
@@ -544,18 +564,26 @@ def detect_lanes(image_bgr, config: LaneDetectorConfig = LaneDetectorConfig(), f
     return _pencil_from_candidates(candidates, fl, config)
 
 
-def _measure_candidates(image_bgr, endpoint_sets, config):
+def _measure_candidates(image_bgr, endpoint_sets, config, distinct=False):
     """Sub-pixel measurement of rough lines (longest first); curved ones are counted, not kept.
 
-    Returns the candidates ``(line, points, length)`` and ``(number, total length)`` of curved ones.
+    ``distinct=True`` (lines known to be different, e.g. followed from the previous frame)
+    measures all lines in one batch; otherwise a cluster lying on an already measured line
+    is skipped as a duplicate.  Returns the candidates ``(line, points, length)`` and
+    ``(number, total length)`` of curved ones.
     """
     candidates, measured = [], []
     n_curved, curved_length = 0, 0.0
-    for ep in sorted(endpoint_sets, key=lambda e: -np.ptp(e, axis=0).max()):
-        # a cluster lying on an already measured line is a duplicate: skip the costly profiles
-        if any(np.max(np.abs(ep @ m[:2] + m[2])) < 3.0 for m in measured):
-            continue
-        pts = _measure_line(image_bgr, ep, config)
+    order = sorted(endpoint_sets, key=lambda e: -np.ptp(e, axis=0).max())
+    batch = _measure_lines(image_bgr, order, config) if distinct else None
+    for k, ep in enumerate(order):
+        if batch is not None:
+            pts = batch[k]
+        else:
+            # a cluster lying on an already measured line is a duplicate: skip the costly profiles
+            if any(np.max(np.abs(ep @ m[:2] + m[2])) < 3.0 for m in measured):
+                continue
+            pts = _measure_line(image_bgr, ep, config)
         if pts is None or len(pts) < 6:
             continue
         line, keep = _robust_fit(pts)
@@ -628,9 +656,10 @@ def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig()):
             # global image motion from the previous frame (phase correlation of a small grey
             # copy): predicts where the lines went when the camera pans or shakes
             scale = 320.0 / img.shape[1]
-            small = cv2.resize(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY),
-                               (320, max(8, int(round(img.shape[0] * scale)))),
-                               interpolation=cv2.INTER_AREA).astype(np.float32)
+            step = max(1, img.shape[1] // 640)  # cheap pre-decimation; phase correlation is coarse anyway
+            small = cv2.cvtColor(cv2.resize(img[::step, ::step], (320, max(8, int(round(img.shape[0] * scale)))),
+                                            interpolation=cv2.INTER_AREA),
+                                 cv2.COLOR_BGR2GRAY).astype(np.float32)
             if prev_small is not None and prev_small.shape == small.shape:
                 if window is None or window.shape != small.shape:
                     window = cv2.createHanningWindow(small.shape[::-1], cv2.CV_32F)
@@ -641,7 +670,7 @@ def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig()):
             size = (img.shape[1], img.shape[0])
             chords = [c for c in (_image_chord(_translate(ln.line, shift), size) for ln in prev.lines)
                       if c is not None]
-            cands, (n_curved, curved_len) = _measure_candidates(img, chords, config)
+            cands, (n_curved, curved_len) = _measure_candidates(img, chords, config, distinct=True)
             if len(cands) >= max(config.min_lines, len(prev.lines) - 1):
                 fl = _pencil_from_candidates(_dedupe(cands, config),
                                              FrameLanes(status="no_lines", image_size=size, frame=i,
@@ -676,11 +705,13 @@ def _assign_track_ids(fl, ref, next_id, shift=(0.0, 0.0)):
     """
     ids = [None] * len(fl.lines)
     if ref is not None and ref.ok and len(ref.lines) >= 2:
-        ref_lines = [_translate(r.line, shift) for r in ref.lines]
-        D = np.array([[np.median(np.abs(ln.points_px @ r[:2] + r[2])) for r in ref_lines]
-                      for ln in fl.lines])
-        spacing = np.median([np.median(np.abs(a.points_px @ b.line[:2] + b.line[2]))
-                             for a, b in zip(ref.lines[:-1], ref.lines[1:])])
+        ref_lines = np.array([_translate(r.line, shift) for r in ref.lines])  # (m, 3)
+        # a dozen points per line are plenty to tell which line continues which
+        pts = [ln.points_px[:: max(1, len(ln.points_px) // 12)] for ln in fl.lines]
+        D = np.array([np.median(np.abs(p @ ref_lines[:, :2].T + ref_lines[:, 2]), axis=0) for p in pts])
+        ref_pts = [r.points_px[:: max(1, len(r.points_px) // 12)] for r in ref.lines]
+        spacing = np.median([np.median(np.abs(a @ b.line[:2] + b.line[2]))
+                             for a, b in zip(ref_pts[:-1], ref.lines[1:])])
         best, best_cost = None, np.inf
         n, m = D.shape
         for shift in range(-(n - 1), m):
