@@ -1,0 +1,390 @@
+"""Ray-cast 3D lifting of an H36M-17 skeleton with known per-frame cameras (seed paper, Sec. 3.3).
+
+* The pelvis, spine, thorax, neck and head rays are cast into the athlete's
+  sagittal plane (the vertical plane of the Kalman-smoothed ground track).
+* Hips and shoulders lie on spheres of half the hip / shoulder width around
+  the pelvis / thorax, on their own side of the sagittal plane.
+* Each limb joint is found where its ray meets a sphere of limb-length
+  radius around its parent: two solutions per joint, four per two-segment
+  chain (hip-knee-ankle, shoulder-elbow-wrist).  When a ray misses its sphere
+  the closest point is taken and the miss distance reported.
+* The candidates are chosen for the whole clip at once by dynamic programming
+  (Viterbi) over frames: range-of-motion penalties per frame plus a penalty on
+  joint jumps between frames.
+
+Everything is vectorised over frames; the per-frame loop left is the Viterbi
+recursion over four states per chain.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .camera import undistort_normalized
+from .filtering import clean_keypoints
+from .skeleton import JOINT_INDEX, SEGMENT_BONES, joint_angles
+from .trajectory import GroundTrack, fit_ground_track
+
+__all__ = [
+    "CameraArrays",
+    "LiftConfig",
+    "LiftResult",
+    "camera_arrays",
+    "pixel_rays",
+    "estimate_segments",
+    "lift",
+    "ANTHROPOMETRIC_RATIOS",
+]
+
+J = JOINT_INDEX
+CHAINS = {  # name: (root, mid, end, segment of root->mid, segment of mid->end)
+    "leg_r": ("r_hip", "r_knee", "r_ankle", "thigh", "shank"),
+    "leg_l": ("l_hip", "l_knee", "l_ankle", "thigh", "shank"),
+    "arm_r": ("r_shoulder", "r_elbow", "r_wrist", "upper_arm", "forearm"),
+    "arm_l": ("l_shoulder", "l_elbow", "l_wrist", "upper_arm", "forearm"),
+}
+#: Widths relative to the trunk (pelvis-thorax) length when they cannot be measured
+#: (Winter 2009 proportions: hip-joint separation 0.10 H, biacromial ~0.21 H, trunk 0.288 H).
+ANTHROPOMETRIC_RATIOS = {"hip_width": 0.10 / 0.288, "shoulder_width": 0.207 / 0.288}
+
+
+@dataclass(frozen=True)
+class CameraArrays:
+    """Per-frame cameras as stacked arrays (frames without a camera are NaN, ``valid`` False)."""
+
+    valid: np.ndarray      # (F,)
+    C: np.ndarray          # (F, 3)
+    R: np.ndarray          # (F, 3, 3)
+    focal_px: np.ndarray   # (F,)
+    principal_px: np.ndarray  # (F, 2)
+    dist: np.ndarray       # (5,) shared by the clip
+
+
+def camera_arrays(cameras):
+    """Stack a list of :class:`~probreg.camera.Camera` (or None) into :class:`CameraArrays`."""
+    F = len(cameras)
+    valid = np.array([c is not None for c in cameras], bool)
+    C = np.full((F, 3), np.nan)
+    R = np.full((F, 3, 3), np.nan)
+    f = np.full(F, np.nan)
+    pp = np.full((F, 2), np.nan)
+    dist = np.zeros(5)
+    for i, c in enumerate(cameras):
+        if c is not None:
+            C[i], R[i], f[i], pp[i] = c.C, c.R, c.focal_px, c.K[:2, 2]
+            dist = c.dist
+    return CameraArrays(valid, C, R, f, pp, np.asarray(dist, float))
+
+
+def pixel_rays(cams: CameraArrays, pts_px):
+    """Unit rays (track frame) through pixels, vectorised: pts (F, K, 2) -> (F, K, 3)."""
+    xy = (pts_px - cams.principal_px[:, None, :]) / cams.focal_px[:, None, None]
+    if np.any(cams.dist):
+        xy = undistort_normalized(xy, cams.dist)
+    d_cam = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], -1)
+    d = np.einsum("fij,fki->fkj", cams.R, d_cam)  # R^T d_cam per frame
+    return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+@dataclass(frozen=True)
+class LiftConfig:
+    """Costs of the candidate selection (dimensionless, ~ squared standard scores)."""
+
+    joint_speed_std_mps: float = 4.0   # relative to the pelvis, between frames
+    rom_penalty: float = 50.0
+    length_std_m: float = 0.015       # limb-length sphere, soft
+    knee_flex_tol: float = 0.15        # sin of the allowed hyperextension
+    elbow_flex_tol: float = 0.25
+    hip_range_deg: tuple = (-60.0, 140.0)
+    leg_lateral_std_m: float = 0.06    # knee/ankle off the leg's own sagittal plane
+    arm_lateral_std_m: float = 0.12    # arms swing a little across the body
+    min_score: float = 0.3
+    ankle_height_m: float = 0.07
+    smooth_cutoff_hz: float | str | None = "auto"  # keypoint low-pass before lifting (None: off)
+
+
+@dataclass(frozen=True)
+class LiftResult:
+    """A lifted clip.
+
+    Attributes
+    ----------
+    joints_track_m : ndarray, shape (F, 17, 3)
+        NaN where a joint could not be lifted.
+    status : list of str
+        Per frame: ``ok``, ``partial`` (some joints missing), ``interpolated`` (no detection
+        in this frame; bridged from its neighbours), ``no_camera``, ``no_detection``.
+    miss_m : ndarray, shape (F, 17)
+        Signed distance of each sphere-cast joint from its limb-length sphere (0 = on it;
+        NaN = not cast): for hips and shoulders the ray's miss distance, for limb joints
+        the residual of the sphere-and-plane fit.
+    track : GroundTrack
+    segments_m : dict
+    """
+
+    joints_track_m: np.ndarray
+    status: list
+    miss_m: np.ndarray
+    track: GroundTrack
+    segments_m: dict
+    extra: dict = field(default_factory=dict)
+
+    def angles_deg(self):
+        """Joint angles (CLIP_FORMAT) with ``f`` = the smoothed running direction per frame."""
+        return joint_angles(self.joints_track_m, forward=self.track.forward)
+
+
+def _plane_hits(origins, dirs, point, normal):
+    """Rays (F,K,3) from origins (F,3) meet planes (point (F,3), normal (F,3)): points (F,K,3)."""
+    num = np.sum((point - origins) * normal, -1)[:, None]
+    den = np.sum(dirs * normal[:, None, :], -1)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = num / den
+    t = np.where(t > 0, t, np.nan)
+    return origins[:, None, :] + t[..., None] * dirs
+
+
+def _sphere_hits(origins, dirs, centres, radius):
+    """Both ray-sphere solutions (F, 2, 3) and miss distances (F,), vectorised."""
+    oc = centres - origins
+    tm = np.sum(oc * dirs, -1)
+    d2 = np.sum(oc * oc, -1) - tm**2
+    h2 = radius**2 - d2
+    h = np.sqrt(np.clip(h2, 0, None))
+    miss = np.where(h2 < 0, np.sqrt(np.clip(d2, 0, None)) - radius, 0.0)
+    sols = origins[:, None, :] + (tm[:, None] + np.array([-1.0, 1.0])[None, :] * h[:, None])[..., None] * dirs[:, None, :]
+    return sols, miss
+
+
+def _side_pick(sols, centre, left, sign):
+    """Of two candidates pick the one on side ``sign`` (+1 left, -1 right) of the sagittal plane."""
+    side = np.sum((sols - centre[:, None, :]) * left[:, None, :], -1) * sign
+    k = np.argmax(side, axis=1)
+    return sols[np.arange(len(sols)), k]
+
+
+def estimate_segments(cameras, keypoints_px, track: GroundTrack | None = None, fps=50.0, percentile=60):
+    """Limb lengths (m) from the clip itself: joints cast into the sagittal plane.
+
+    The athlete's limbs move mostly in sagittal planes, so casting both ends
+    of a limb into the mid-sagittal plane gives its length foreshortened only
+    when it leaves that plane; the ``percentile``-th largest value over the
+    clip is taken.  Widths, which a side view cannot measure, follow from the
+    trunk length with :data:`ANTHROPOMETRIC_RATIOS`.
+    """
+    kp = np.asarray(keypoints_px, float)
+    cams = cameras if isinstance(cameras, CameraArrays) else camera_arrays(cameras)
+    if track is None:
+        track = fit_ground_track(cameras, kp, fps)
+    point = np.column_stack([track.position_m, np.zeros(len(kp))])
+    rays = pixel_rays(cams, kp[..., :2])
+    P = _plane_hits(cams.C, rays, point, track.left)
+    out = {}
+    for seg, pairs in SEGMENT_BONES.items():
+        if seg in ANTHROPOMETRIC_RATIOS:
+            continue
+        lens = np.concatenate([np.linalg.norm(P[:, J[b]] - P[:, J[a]], axis=-1) for a, b in pairs])
+        lens = lens[np.isfinite(lens)]
+        out[seg] = float(np.percentile(lens, percentile)) if len(lens) else float("nan")
+    # the trunk line is in the plane: its median is unbiased
+    tr = np.linalg.norm(P[:, J["thorax"]] - P[:, J["pelvis"]], axis=-1)
+    tr = tr[np.isfinite(tr)]
+    if len(tr):
+        out["trunk"] = float(np.median(tr))
+    for seg, ratio in ANTHROPOMETRIC_RATIOS.items():
+        out[seg] = ratio * out.get("trunk", np.nan)
+    return out
+
+
+def _refine_on_ray(origins, dirs, root, length, normal, t0, sd_len, sd_lat, iters=6):
+    """Depth along each ray that best meets both the limb-length sphere around ``root`` and
+    the limb's sagittal plane (through ``root``, normal ``normal``): Gauss-Newton on
+
+    ``((|q| - L) / sd_len)^2 + ((q . n) / sd_lat)^2``,  ``q = o + t d - root``.
+
+    With exact keypoints the sphere term is met exactly; with noisy ones it stops the
+    depth from running away where a ray grazes its sphere (the limb almost parallel to
+    the image plane), which is where the pure ray-sphere solution is ill-conditioned.
+    Returns points (F, 3) and the sphere misfit ``|q| - L`` (F,).
+    """
+    t = t0.copy()
+    dn = np.sum(dirs * normal, -1)
+    for _ in range(iters):
+        q = origins + t[:, None] * dirs - root
+        nq = np.linalg.norm(q, axis=-1)
+        qd = np.sum(q * dirs, -1) / np.maximum(nq, 1e-9)
+        r1 = (nq - length) / sd_len
+        r2 = np.sum(q * normal, -1) / sd_lat
+        j1 = qd / sd_len
+        j2 = dn / sd_lat
+        step = (r1 * j1 + r2 * j2) / np.maximum(j1 * j1 + j2 * j2, 1e-12)
+        t = t - step
+    q = origins + t[:, None] * dirs - root
+    return origins + t[:, None] * dirs, np.linalg.norm(q, axis=-1) - length
+
+
+def _chain_candidates(origins, rays, root, L1, L2, i_mid, i_end, normal, sd_len, sd_lat):
+    """Four candidate (mid, end) pairs per frame: (F, 4, 2, 3), and misfits (F, 4).
+
+    Each joint starts from both ray-sphere solutions (the closest point when the ray
+    misses) and is refined against sphere and sagittal plane together.
+    """
+    F = len(origins)
+    cands = np.empty((F, 4, 2, 3))
+    misfit = np.empty((F, 4))
+
+    def starts(d, centre, L):
+        oc = centre - origins
+        tm = np.sum(oc * d, -1)
+        h = np.sqrt(np.clip(L**2 - (np.sum(oc * oc, -1) - tm**2), 0, None))
+        return tm - h, tm + h
+
+    d_mid, d_end = rays[:, i_mid], rays[:, i_end]
+    for a, t0 in enumerate(starts(d_mid, root, L1)):
+        mid, m1 = _refine_on_ray(origins, d_mid, root, L1, normal, t0, sd_len, sd_lat)
+        for b, t1 in enumerate(starts(d_end, mid, L2)):
+            end, m2 = _refine_on_ray(origins, d_end, mid, L2, normal, t1, sd_len, sd_lat)
+            cands[:, 2 * a + b, 0] = mid
+            cands[:, 2 * a + b, 1] = end
+            misfit[:, 2 * a + b] = np.abs(m1) + np.abs(m2)
+    return cands, misfit
+
+
+def _viterbi(emission, transition):
+    """Min-cost state path. emission (F, S); transition (F-1, S, S) cost from s' to s."""
+    F, S = emission.shape
+    cost = emission[0].copy()
+    back = np.zeros((F, S), int)
+    for t in range(1, F):
+        tot = cost[:, None] + transition[t - 1]
+        back[t] = np.argmin(tot, axis=0)
+        cost = tot[back[t], np.arange(S)] + emission[t]
+    path = np.empty(F, int)
+    path[-1] = int(np.argmin(cost))
+    for t in range(F - 1, 0, -1):
+        path[t - 1] = back[t, path[t]]
+    return path
+
+
+def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | None = None,
+         config: LiftConfig = LiftConfig()):
+    """Lift 2D keypoints to 3D joints in the track frame.
+
+    Parameters
+    ----------
+    cameras : list of Camera or None (length F), or CameraArrays
+    keypoints_px : array_like, shape (F, 17, 3)
+        H36M-17 ``(x, y, score)``; NaN or low-score joints are missing.
+    fps : float
+    segments_m : dict, optional
+        Segment lengths keyed as :data:`probreg.skeleton.SEGMENT_BONES`; estimated from
+        the clip (:func:`estimate_segments`) when not given.
+    track : GroundTrack, optional
+        Precomputed ground track (else fitted here).
+    config : LiftConfig
+
+    Returns
+    -------
+    LiftResult
+
+    Raises
+    ------
+    ValueError
+        If the keypoints do not have shape (F, 17, 2|3) or the camera count differs.
+    """
+    kp = np.array(keypoints_px, float)
+    if kp.ndim != 3 or kp.shape[1] != 17 or kp.shape[2] not in (2, 3):
+        raise ValueError(f"keypoints must have shape (F, 17, 3), got {kp.shape}")
+    if kp.shape[2] == 2:
+        kp = np.concatenate([kp, np.ones(kp.shape[:2] + (1,))], -1)
+    kp[kp[..., 2] < config.min_score] = np.nan
+    kp[~np.all(np.isfinite(kp), -1)] = np.nan
+    raw_missing = ~np.all(np.isfinite(kp), -1)
+    if config.smooth_cutoff_hz is not None:
+        kp = clean_keypoints(kp, fps, cutoff_hz=config.smooth_cutoff_hz)
+    F = len(kp)
+    cams = cameras if isinstance(cameras, CameraArrays) else camera_arrays(cameras)
+    if len(cams.valid) != F:
+        raise ValueError(f"{len(cams.valid)} cameras for {F} frames of keypoints")
+    cam_list = cameras if not isinstance(cameras, CameraArrays) else None
+    if track is None:
+        if cam_list is None:
+            raise ValueError("pass a GroundTrack together with CameraArrays")
+        track = fit_ground_track(cam_list, kp, fps, ankle_height_m=config.ankle_height_m)
+    if segments_m is None:
+        segments_m = estimate_segments(cams, kp, track, fps)
+    seg = {k: float(v) for k, v in segments_m.items()}
+    origins = cams.C
+    rays = pixel_rays(cams, kp[..., :2])  # (F, 17, 3), NaN where missing
+    left = track.left
+    fwd = track.forward
+    point = np.column_stack([track.position_m, np.zeros(F)])
+    joints = np.full((F, 17, 3), np.nan)
+    miss = np.full((F, 17), np.nan)
+    # mid-sagittal joints
+    mids = [J[n] for n in ("pelvis", "spine", "thorax", "neck", "head")]
+    joints[:, mids] = _plane_hits(origins, rays[:, mids], point, left)
+    # hips and shoulders on their side of the plane
+    for centre, (rj, lj), width in (("pelvis", ("r_hip", "l_hip"), "hip_width"),
+                                     ("thorax", ("r_shoulder", "l_shoulder"), "shoulder_width")):
+        c = joints[:, J[centre]]
+        for name, sign in ((rj, -1.0), (lj, 1.0)):
+            sols, m = _sphere_hits(origins, rays[:, J[name]], c, seg[width] / 2)
+            joints[:, J[name]] = _side_pick(sols, c, left, sign)
+            miss[:, J[name]] = m
+    # limb chains: candidates, then Viterbi over the clip
+    z = np.array([0.0, 0.0, 1.0])
+    lean = np.arctan2(np.sum((joints[:, J["thorax"]] - joints[:, J["pelvis"]]) * fwd, -1),
+                      (joints[:, J["thorax"]] - joints[:, J["pelvis"]])[:, 2])
+    pelvis = joints[:, J["pelvis"]]
+    sig = config.joint_speed_std_mps / fps
+    for name, (root, mid, end, s1, s2) in CHAINS.items():
+        r = joints[:, J[root]]
+        lat_std = config.leg_lateral_std_m if name.startswith("leg") else config.arm_lateral_std_m
+        cands, cmiss = _chain_candidates(origins, rays, r, seg[s1], seg[s2], J[mid], J[end], left,
+                                         config.length_std_m, lat_std)
+        u = cands[:, :, 0] - r[:, None]  # root -> mid
+        v = cands[:, :, 1] - cands[:, :, 0]  # mid -> end
+        bend = np.sum(np.cross(u, v) * left[:, None], -1) / (seg[s1] * seg[s2])  # sin of signed flexion
+        e = (cmiss / config.length_std_m) ** 2
+        # limbs swing in the sagittal plane through their root: the mirror solution of a
+        # ray-sphere pair lies across the body (the camera looks roughly along the plane normal)
+        lateral = np.sum((cands - r[:, None, None, :]) * left[:, None, None, :], -1)  # (F, 4, 2)
+        e += np.sum(lateral**2, -1) / lat_std**2
+        if name.startswith("leg"):
+            e += config.rom_penalty * (bend < -config.knee_flex_tol)
+            hip = np.degrees(np.arctan2(np.sum(u * fwd[:, None], -1), -u[..., 2]) + lean[:, None])
+            lo, hi = config.hip_range_deg
+            e += config.rom_penalty * ((hip < lo) | (hip > hi))
+            e += config.rom_penalty * (cands[:, :, 1, 2] < -0.05)  # ankle below the ground
+        else:
+            e += config.rom_penalty * (bend > config.elbow_flex_tol)  # elbows flex forward
+        e = np.where(np.isfinite(e), e, 0.0)
+        rel = cands - pelvis[:, None, None, :]
+        d = rel[1:, None, :, :, :] - rel[:-1, :, None, :, :]  # (F-1, S', S, 2, 3)
+        T = np.sum(d**2, axis=(-1, -2)) / (2 * sig**2)
+        T = np.where(np.isfinite(T), T, 0.0)
+        path = _viterbi(e, T)
+        chosen = cands[np.arange(F), path]
+        joints[:, J[mid]] = chosen[:, 0]
+        joints[:, J[end]] = chosen[:, 1]
+        miss[:, J[mid]] = np.linalg.norm(chosen[:, 0] - r, axis=-1) - seg[s1]
+        miss[:, J[end]] = np.linalg.norm(chosen[:, 1] - chosen[:, 0], axis=-1) - seg[s2]
+    # a joint whose ray is missing stays missing (no candidate is invented)
+    missing = ~np.all(np.isfinite(rays), -1)
+    joints[missing] = np.nan
+    status = []
+    for i in range(F):
+        if not cams.valid[i]:
+            status.append("no_camera")
+        elif raw_missing[i].all() and missing[i].all():
+            status.append("no_detection")
+        elif np.isnan(joints[i]).any():
+            status.append("partial")
+        elif raw_missing[i].all():
+            status.append("interpolated")
+        else:
+            status.append("ok")
+    return LiftResult(joints_track_m=joints, status=status, miss_m=miss, track=track, segments_m=seg)

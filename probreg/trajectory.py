@@ -1,0 +1,236 @@
+"""Ground contacts and the athlete's line of travel: ray-cast feet, Kalman filter, RTS smoother.
+
+A foot in contact is momentarily still on the ground: its ankle, cast onto
+the plane of the ankle height, stops moving while the athlete runs on.  A
+swinging ankle cast onto that plane lands beyond the athlete and moves at
+about twice the running speed.  Each contact gives one point; a
+constant-velocity Kalman filter with an RTS smoother (``filterpy``) over
+those points yields the athlete's ground track in every frame, flight phases
+included, with a covariance, the running direction ``f`` and so the sagittal
+plane.  The filter's log-likelihood measures how smooth a runner's path this
+camera hypothesis implies (the Bayesian model uses it).
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from .skeleton import JOINT_INDEX
+
+__all__ = ["GroundTrack", "TrackConfig", "cast_ankles", "detect_contacts", "fit_ground_track"]
+
+
+@dataclass(frozen=True)
+class TrackConfig:
+    """Noise model of the ground-track filter.
+
+    Attributes
+    ----------
+    accel_std_mps2 : (float, float)
+        Process noise (white acceleration) along and across the track: a runner
+        on a straight changes speed a little and drifts laterally even less.
+    contact_std_m : (float, float)
+        Scatter of a contact point about the athlete's track at mid-stance, along
+        (foot placement ahead of or behind the centre of mass) and across (after
+        removing half the step width, estimated from the clip's left and right contacts).
+    contact_speed_frac : float
+        A cast ankle slower than this fraction of the running speed is in contact.
+    min_contact_frames : int
+    """
+
+    accel_std_mps2: tuple = (1.5, 0.6)
+    contact_std_m: tuple = (0.10, 0.03)
+    contact_speed_frac: float = 0.35
+    min_contact_frames: int = 2
+
+
+@dataclass(frozen=True)
+class GroundTrack:
+    """The athlete's ground track (track frame, metres).
+
+    Attributes
+    ----------
+    position_m, velocity_mps : ndarray, shape (F, 2)
+        Smoothed ``(x, y)`` and its rate.
+    cov : ndarray, shape (F, 4, 4)
+        Covariance of ``(x, vx, y, vy)``.
+    contacts : ndarray of bool, shape (F, 2)
+        ``[left, right]`` foot on the ground.
+    contact_points_m : ndarray, shape (K, 4)
+        ``(frame, side, x, y)`` of every contact (side 0 = left, 1 = right).
+    log_likelihood : float
+        Sum of the filter's measurement log-likelihoods.
+    status : str
+        ``ok`` or the reason the track is a fallback (``few_contacts``, ``no_feet``).
+    half_step_m : float
+        Half the lateral distance between left and right footprints.
+    """
+
+    position_m: np.ndarray
+    velocity_mps: np.ndarray
+    cov: np.ndarray
+    contacts: np.ndarray
+    contact_points_m: np.ndarray
+    log_likelihood: float
+    status: str = "ok"
+    half_step_m: float = 0.0
+
+    @property
+    def forward(self):
+        """Unit running direction per frame, shape (F, 3) (horizontal)."""
+        v = self.velocity_mps
+        n = np.linalg.norm(v, axis=1, keepdims=True)
+        f = np.where(n > 1e-6, v / np.maximum(n, 1e-12), [1.0, 0.0])
+        return np.column_stack([f, np.zeros(len(f))])
+
+    @property
+    def left(self):
+        """Unit left direction per frame (``z x f``), the sagittal plane's normal, shape (F, 3)."""
+        f = self.forward
+        return np.column_stack([-f[:, 1], f[:, 0], np.zeros(len(f))])
+
+
+def _rays(cameras, pts_px):
+    """Per-frame rays: origins (F, 3) and unit directions (F, K, 3); NaN where no camera."""
+    F, K = pts_px.shape[:2]
+    origins = np.full((F, 3), np.nan)
+    dirs = np.full((F, K, 3), np.nan)
+    for i, cam in enumerate(cameras):
+        if cam is None:
+            continue
+        origins[i] = cam.C
+        dirs[i] = cam.rays_from_pixels(pts_px[i])
+    return origins, dirs
+
+
+def cast_ankles(cameras, keypoints_px, ankle_height_m=0.07):
+    """Ankles ``[left, right]`` cast onto the plane ``z = ankle_height_m``: (F, 2, 3), NaN if missing."""
+    kp = np.asarray(keypoints_px, float)[:, [JOINT_INDEX["l_ankle"], JOINT_INDEX["r_ankle"]], :2]
+    o, d = _rays(cameras, kp)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = (ankle_height_m - o[:, None, 2]) / d[..., 2]
+    t = np.where(t > 0, t, np.nan)
+    return o[:, None, :] + t[..., None] * d
+
+
+def detect_contacts(ankles_m, fps, config: TrackConfig = TrackConfig()):
+    """Contact flags ``[left, right]`` (F, 2) from the speed of the cast ankles."""
+    F = len(ankles_m)
+    xy = ankles_m[..., :2]
+    speed = np.full((F, 2), np.nan)
+    if F >= 3:
+        speed[1:-1] = np.linalg.norm(xy[2:] - xy[:-2], axis=-1) * fps / 2
+    # typical running speed: the median speed of the athlete (mean of both feet ~ body)
+    body = np.nanmean(xy, axis=1)
+    with np.errstate(invalid="ignore"):
+        run = np.nanmedian(np.linalg.norm(np.diff(body, axis=0), axis=-1)) * fps if F > 1 else np.nan
+    thr = config.contact_speed_frac * run if np.isfinite(run) and run > 0.5 else 1.0
+    with np.errstate(invalid="ignore"):
+        contact = speed < thr
+    # the foot on the ground is the lower one: when both look still, keep the nearer cast
+    out = np.zeros((F, 2), bool)
+    for s in (0, 1):
+        c = contact[:, s]
+        # drop runs shorter than the minimum
+        edges = np.diff(np.concatenate([[0], c.astype(int), [0]]))
+        for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+            if b - a >= config.min_contact_frames:
+                out[a:b, s] = True
+    return out
+
+
+def _contact_points(ankles_m, contacts):
+    pts = []
+    for s in (0, 1):
+        c = contacts[:, s]
+        edges = np.diff(np.concatenate([[0], c.astype(int), [0]]))
+        for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+            run = ankles_m[a:b, s, :2]
+            ok = np.all(np.isfinite(run), -1)
+            if ok.any():
+                x, y = np.median(run[ok], axis=0)
+                pts.append(((a + b - 1) / 2, s, x, y))
+    pts.sort()
+    return np.array(pts, float).reshape(-1, 4)
+
+
+def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: TrackConfig = TrackConfig()):
+    """Contacts and the Kalman/RTS-smoothed ground track of the athlete.
+
+    Parameters
+    ----------
+    cameras : list of Camera or None, length F
+    keypoints_px : ndarray, shape (F, 17, 3)
+        H36M-17 keypoints; NaN = missing.
+    fps : float
+    ankle_height_m : float
+        Height of the ankle joint centre above the ground in stance.
+
+    Returns
+    -------
+    GroundTrack
+    """
+    from filterpy.common import Q_discrete_white_noise
+    from filterpy.kalman import KalmanFilter
+
+    F = len(keypoints_px)
+    ankles = cast_ankles(cameras, keypoints_px, ankle_height_m)
+    contacts = detect_contacts(ankles, fps, config)
+    cps = _contact_points(ankles, contacts)
+    status = "ok"
+    R_meas = np.diag(np.square(config.contact_std_m))
+    # left feet land left of the line of travel, right feet right of it: remove half the
+    # step width (estimated from the clip) so that contacts measure the centre line
+    half_step = 0.0
+    if len(cps) >= 2 and (cps[:, 1] == 0).any() and (cps[:, 1] == 1).any():
+        d = cps[-1, 2:] - cps[0, 2:]
+        n = np.linalg.norm(d)
+        lat = np.array([-d[1], d[0]]) / n if n > 1e-6 else np.array([0.0, 1.0])
+        off = cps[:, 2:] @ lat
+        half_step = 0.5 * (np.median(off[cps[:, 1] == 0]) - np.median(off[cps[:, 1] == 1]))
+        half_step = float(np.clip(half_step, 0.0, 0.25))
+        centred = cps[:, 2:] - np.where(cps[:, 1:2] == 0, 1.0, -1.0) * half_step * lat
+    else:
+        centred = cps[:, 2:]
+    meas = {int(round(c[0])): p for c, p in zip(cps, centred)}
+    if len(cps) < 2:
+        # fallback: per-frame mean of the cast ankles, heavily de-weighted
+        status = "few_contacts" if np.isfinite(ankles).any() else "no_feet"
+        body = np.nanmean(ankles[..., :2], axis=1) if np.isfinite(ankles).any() else np.full((F, 2), np.nan)
+        meas = {i: body[i] for i in range(F) if np.all(np.isfinite(body[i]))}
+        R_meas = np.diag([0.5**2, 0.3**2])
+    dt = 1.0 / fps
+    kf = KalmanFilter(dim_x=4, dim_z=2)
+    kf.F = np.kron(np.eye(2), np.array([[1.0, dt], [0.0, 1.0]]))
+    kf.H = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
+    kf.Q = np.zeros((4, 4))
+    kf.Q[:2, :2] = Q_discrete_white_noise(2, dt=dt, var=config.accel_std_mps2[0] ** 2)
+    kf.Q[2:, 2:] = Q_discrete_white_noise(2, dt=dt, var=config.accel_std_mps2[1] ** 2)
+    kf.R = R_meas
+    keys = sorted(meas)
+    if not keys:
+        nan = np.full((F, 2), np.nan)
+        return GroundTrack(nan, nan, np.full((F, 4, 4), np.nan), contacts, cps, -np.inf, "no_feet")
+    # initial state from the first measurements
+    if len(keys) >= 2:
+        k0, k1 = keys[0], keys[-1]
+        v0 = (meas[k1] - meas[k0]) / max((k1 - k0) * dt, dt)
+    else:
+        v0 = np.zeros(2)
+    p0 = meas[keys[0]] - v0 * keys[0] * dt
+    kf.x = np.array([p0[0], v0[0], p0[1], v0[1]])
+    kf.P = np.diag([4.0, 4.0, 1.0, 1.0])
+    xs, Ps = np.zeros((F, 4)), np.zeros((F, 4, 4))
+    loglik = 0.0
+    for i in range(F):
+        if i > 0:
+            kf.predict()
+        if i in meas:
+            kf.update(meas[i])
+            loglik += float(kf.log_likelihood)
+        xs[i], Ps[i] = kf.x, kf.P
+    xs, Ps, _, _ = kf.rts_smoother(xs, Ps)
+    return GroundTrack(position_m=xs[:, [0, 2]], velocity_mps=xs[:, [1, 3]], cov=Ps, contacts=contacts,
+                       contact_points_m=cps, log_likelihood=loglik, status=status, half_step_m=half_step)
