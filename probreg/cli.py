@@ -115,6 +115,43 @@ def _cmd_calibrate(args):
     return 0
 
 
+def _cmd_lift(args):
+    from .io.clip import atomic_output_dir, load_clip, read_cameras_json, write_json
+    from .io.results import write_angles_csv, write_joints_npz
+    from .lifting import LiftConfig, lift
+
+    clip = load_clip(args.clip, min_score=args.min_score)
+    if clip.keypoints_px is None:
+        raise CliError(f"{args.clip}: no keypoints2d.json to lift (run 'probreg detect' first)")
+    cams_by_frame = read_cameras_json(args.cameras, image_size=clip.image_size)
+    cams = [cams_by_frame.get(i) for i in range(clip.n_frames)]
+    if not any(c is not None for c in cams):
+        raise CliError(f"{args.cameras}: no frame has a camera")
+    segments = None
+    if args.segments:
+        import json
+
+        try:
+            segments = json.loads(Path(args.segments).read_text())
+            segments = segments.get("segments_m", segments)
+        except (OSError, ValueError) as exc:
+            raise CliError(f"{args.segments}: cannot read segment lengths ({exc})") from None
+    cfg = LiftConfig(min_score=args.min_score,
+                     smooth_cutoff_hz=None if args.no_smooth else "auto")
+    res = lift(cams, clip.keypoints_px, clip.fps, segments_m=segments, config=cfg)
+    ang = res.angles_deg()
+    with atomic_output_dir(args.out, overwrite=True) as tmp:
+        write_joints_npz(tmp / "joints3d.npz", res.joints_track_m)
+        write_angles_csv(tmp / "angles.csv", clip.fps, ang)
+        write_json(tmp / "lift.json", {"frame_status": res.status, "segments_m": res.segments_m,
+                                      "track_status": res.track.status,
+                                      "contacts": res.track.contacts.astype(int).tolist(),
+                                      "ground_track_m": res.track.position_m})
+    n_ok = sum(s in ("ok", "interpolated") for s in res.status)
+    print(f"lifted {n_ok}/{clip.n_frames} frames -> {args.out}")
+    return 0
+
+
 def _cmd_bench(args):
     from .bench import BENCHMARKS, run_benchmark
 
@@ -172,6 +209,16 @@ def build_parser():
     c.add_argument("--no-smooth", action="store_true", help="no temporal smoothing of the vanishing point")
     c.add_argument("--min-score", type=float, default=0.3, help="keypoints below this score are missing")
     c.set_defaults(func=_cmd_calibrate)
+
+    lf = sub.add_parser("lift", help="lift 2D keypoints to 3D with given per-frame cameras")
+    lf.add_argument("clip", type=Path)
+    lf.add_argument("--cameras", type=Path, required=True, help="camera.json / cameras.json layout of CLIP_FORMAT")
+    lf.add_argument("--out", type=Path, required=True)
+    lf.add_argument("--segments", type=Path, default=None,
+                    help="JSON of segment lengths (m), e.g. groundtruth/athlete.json; estimated when absent")
+    lf.add_argument("--min-score", type=float, default=0.3)
+    lf.add_argument("--no-smooth", action="store_true", help="no outlier rejection / low-pass of keypoints")
+    lf.set_defaults(func=_cmd_lift)
 
     b = sub.add_parser("bench", help="run a benchmark and write reports/bench_<name>.md")
     b.add_argument("name", nargs="?", help="benchmark name or 'all'")

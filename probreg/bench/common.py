@@ -20,6 +20,7 @@ BENCHMARKS = {
     "realism": "probreg.bench.realism:run",
     "synth-speed": "probreg.bench.synth_speed:run",
     "registration": "probreg.bench.registration:run",
+    "lifting": "probreg.bench.lifting:run",
 }
 
 

@@ -13,6 +13,7 @@ from .clip import (
     write_keypoints_json,
 )
 from .frames import has_frames, iter_frames, read_frame
+from .results import read_angles_csv, write_angles_csv, write_joints_npz
 
 __all__ = [
     "Clip",
@@ -28,4 +29,7 @@ __all__ = [
     "has_frames",
     "iter_frames",
     "read_frame",
+    "read_angles_csv",
+    "write_angles_csv",
+    "write_joints_npz",
 ]

@@ -1,0 +1,72 @@
+"""Writers (and readers) of the result layout of ``CLIP_FORMAT.md``: angles.csv, joints3d.npz."""
+
+from __future__ import annotations
+
+import csv
+from pathlib import Path
+
+import numpy as np
+
+from ..skeleton import ANGLE_NAMES, JOINT_NAMES
+from .clip import ClipFormatError
+
+__all__ = ["write_angles_csv", "read_angles_csv", "write_joints_npz"]
+
+
+def write_angles_csv(path, fps, median, lo=None, hi=None, frames=None):
+    """Long-format ``frame,time_s,angle,median_deg,lo_deg,hi_deg``.
+
+    Parameters
+    ----------
+    median, lo, hi : dict of str -> ndarray (F,)
+        Per-angle series in degrees (``lo``/``hi``: 5 % / 95 % quantiles; default = median).
+        NaN values are written as ``nan`` (frames the pipeline could not estimate).
+    """
+    lo = median if lo is None else lo
+    hi = median if hi is None else hi
+    n = len(next(iter(median.values())))
+    frames = np.arange(n) if frames is None else np.asarray(frames)
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(["frame", "time_s", "angle", "median_deg", "lo_deg", "hi_deg"])
+        for i, fr in enumerate(frames):
+            for name in ANGLE_NAMES:
+                if name not in median:
+                    continue
+                w.writerow([int(fr), f"{fr / fps:.4f}", name] +
+                           [f"{float(v[name][i]):.3f}" for v in (median, lo, hi)])
+    return Path(path)
+
+
+def read_angles_csv(path):
+    """Read ``angles.csv`` into ``{angle: (frames, median, lo, hi)}`` arrays.
+
+    Raises
+    ------
+    ClipFormatError
+        On a missing file or a wrong header.
+    """
+    path = Path(path)
+    if not path.exists():
+        raise ClipFormatError(f"{path}: file not found")
+    with open(path, encoding="utf-8") as fh:
+        r = csv.reader(fh)
+        header = next(r, None)
+        if header != ["frame", "time_s", "angle", "median_deg", "lo_deg", "hi_deg"]:
+            raise ClipFormatError(f"{path}: unexpected header {header}")
+        rows = list(r)
+    out = {}
+    for name in {row[2] for row in rows}:
+        sel = [row for row in rows if row[2] == name]
+        out[name] = tuple(np.array([float(row[k]) for row in sel]) for k in (0, 3, 4, 5))
+    return out
+
+
+def write_joints_npz(path, median, samples=None, **extra):
+    """``joints3d.npz`` with ``median`` (F, 17, 3), ``joint_names`` and optional ``samples`` (S, F, 17, 3)."""
+    arrays = {"median": np.asarray(median, float), "joint_names": np.array(JOINT_NAMES)}
+    if samples is not None:
+        arrays["samples"] = np.asarray(samples, np.float32)
+    arrays.update({k: np.asarray(v) for k, v in extra.items()})
+    np.savez_compressed(path, **arrays)
+    return Path(path)
