@@ -18,9 +18,11 @@ __all__ = ["hampel", "fill_gaps", "butterworth", "clean_keypoints", "keypoint_no
 def keypoint_noise_px(keypoints_px, joints=(0, 7, 8)):
     """Robust estimate of the per-coordinate detection noise (px) from the trunk joints.
 
-    The trunk (pelvis, spine, thorax in H36M order) moves smoothly, so its
-    second differences over three frames are noise: ``std = sqrt(6) sigma`` for
-    white noise.  Returns 0 for perfectly smooth input (camera shake adds ~1 px).
+    The trunk (pelvis, spine, thorax in H36M order) moves smoothly relative to
+    itself: second differences of the spine and thorax *relative to the pelvis*
+    (camera pan and shake cancel) are noise, with standard deviation
+    ``sqrt(12) sigma`` for white noise (``sqrt(6)`` for the second difference,
+    ``sqrt(2)`` for the difference of two joints).  Returns ~0 for exact input.
 
     >>> rng = np.random.default_rng(0)
     >>> kp = np.zeros((400, 17, 3)); kp[..., :2] += rng.normal(0, 2.0, (400, 17, 2))
@@ -28,11 +30,12 @@ def keypoint_noise_px(keypoints_px, joints=(0, 7, 8)):
     True
     """
     kp = np.asarray(keypoints_px, float)[:, list(joints), :2]
-    d2 = kp[2:] - 2 * kp[1:-1] + kp[:-2]
+    rel = kp[:, 1:] - kp[:, :1]
+    d2 = rel[2:] - 2 * rel[1:-1] + rel[:-2]
     d2 = d2[np.isfinite(d2)]
     if len(d2) < 10:
         return float("nan")
-    return float(1.4826 * np.median(np.abs(d2)) / np.sqrt(6))
+    return float(1.4826 * np.median(np.abs(d2)) / np.sqrt(12))
 
 
 def hampel(x, half_window=4, n_sigma=3.0, min_scale=1.0):

@@ -13,6 +13,7 @@ camera hypothesis implies (the Bayesian model uses it).
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass
 
 import numpy as np
@@ -123,7 +124,9 @@ def detect_contacts(ankles_m, fps, config: TrackConfig = TrackConfig()):
     if F >= 3:
         speed[1:-1] = np.linalg.norm(xy[2:] - xy[:-2], axis=-1) * fps / 2
     # typical running speed: the median speed of the athlete (mean of both feet ~ body)
-    body = np.nanmean(xy, axis=1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN frames stay NaN
+        body = np.nanmean(xy, axis=1)
     with np.errstate(invalid="ignore"):
         run = np.nanmedian(np.linalg.norm(np.diff(body, axis=0), axis=-1)) * fps if F > 1 else np.nan
     thr = config.contact_speed_frac * run if np.isfinite(run) and run > 0.5 else 1.0
@@ -147,7 +150,9 @@ def _contact_points(ankles_m, contacts):
         c = contacts[:, s]
         edges = np.diff(np.concatenate([[0], c.astype(int), [0]]))
         for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
-            run = ankles_m[a:b, s, :2]
+            # the first half of the contact is foot-flat; later the heel rises and the
+            # raised ankle, cast onto the ankle-height plane, lands beyond the foot
+            run = ankles_m[a:a + max(1, (b - a + 1) // 2), s, :2]
             ok = np.all(np.isfinite(run), -1)
             if ok.any():
                 x, y = np.median(run[ok], axis=0)
@@ -198,7 +203,9 @@ def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: Tr
     if len(cps) < 2:
         # fallback: per-frame mean of the cast ankles, heavily de-weighted
         status = "few_contacts" if np.isfinite(ankles).any() else "no_feet"
-        body = np.nanmean(ankles[..., :2], axis=1) if np.isfinite(ankles).any() else np.full((F, 2), np.nan)
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            body = np.nanmean(ankles[..., :2], axis=1) if np.isfinite(ankles).any() else np.full((F, 2), np.nan)
         meas = {i: body[i] for i in range(F) if np.all(np.isfinite(body[i]))}
         R_meas = np.diag([0.5**2, 0.3**2])
     dt = 1.0 / fps

@@ -1,0 +1,143 @@
+"""Ground track, lifting, keypoint cleaning, baselines and `probreg lift`."""
+
+import json
+
+import numpy as np
+import pytest
+
+from probreg.baselines import generic_camera_lift, planar_knee_angles
+from probreg.cli import main
+from probreg.filtering import butterworth, clean_keypoints, fill_gaps, hampel, keypoint_noise_px
+from probreg.io import load_clip, load_groundtruth, read_angles_csv
+from probreg.lifting import LiftConfig, camera_arrays, estimate_segments, lift, pixel_rays
+from probreg.skeleton import JOINT_INDEX, joint_angles
+from probreg.trajectory import fit_ground_track
+
+
+@pytest.fixture(scope="module")
+def exact(small_clip):
+    clip = load_clip(small_clip)
+    gt = load_groundtruth(small_clip)
+    F = clip.n_frames
+    j2 = np.concatenate([gt.joints2d_px, np.ones((F, 17, 1))], -1)
+    return clip, gt, j2
+
+
+def test_pixel_rays_match_camera_rays(exact):
+    clip, gt, j2 = exact
+    arr = camera_arrays(gt.cameras)
+    rays = pixel_rays(arr, j2[..., :2])
+    for i in (0, 17, 39):
+        assert np.allclose(rays[i], gt.cameras[i].rays_from_pixels(j2[i, :, :2]), atol=1e-12)
+
+
+def test_ground_track_follows_the_athlete(exact):
+    clip, gt, j2 = exact
+    tr = fit_ground_track(gt.cameras, j2, clip.fps)
+    assert tr.status == "ok" and len(tr.contact_points_m) >= 2
+    pel = gt.joints3d_track_m[:, 0, :2]
+    assert np.max(np.abs(tr.position_m[:, 1] - pel[:, 1])) < 0.15
+    speed = np.linalg.norm(tr.velocity_mps, axis=1)
+    true_speed = gt.athlete["gait"]["speed_mps"]
+    assert abs(np.median(speed) - true_speed) < 0.1 * true_speed
+    assert np.allclose(np.linalg.norm(tr.forward, axis=1), 1)
+    assert np.isfinite(tr.log_likelihood)
+    # contacts agree with the truth in most frames
+    assert (tr.contacts == gt.contacts).mean() > 0.75
+
+
+def test_lifting_known_answer_with_exact_input(exact):
+    clip, gt, j2 = exact
+    res = lift(gt.cameras, j2, clip.fps, segments_m=gt.athlete["segments_m"])
+    rel = res.joints_track_m - res.joints_track_m[:, :1]
+    true_rel = gt.joints3d_track_m - gt.joints3d_track_m[:, :1]
+    assert np.nanmean(np.linalg.norm(rel - true_rel, axis=-1)) < 0.01  # < 1 cm
+    a, t = res.angles_deg(), joint_angles(gt.joints3d_track_m)
+    for side in "lr":
+        assert np.nanmean(np.abs(a[f"knee_{side}"] - t[f"knee_{side}"])) < 1.0
+    assert set(res.status) == {"ok"}
+    # every limb joint sits on its limb-length sphere
+    assert np.nanmax(np.abs(res.miss_m[:, [JOINT_INDEX["r_knee"], JOINT_INDEX["l_ankle"]]])) < 0.02
+
+
+def test_segment_lengths_estimated_from_the_clip(exact):
+    clip, gt, j2 = exact
+    est = estimate_segments(gt.cameras, j2, fps=clip.fps)
+    for seg in ("thigh", "shank", "trunk"):
+        assert abs(est[seg] - gt.athlete["segments_m"][seg]) < 0.03
+
+
+def test_missing_detections_and_cameras_get_statuses(exact):
+    clip, gt, j2 = exact
+    kp = j2.copy()
+    kp[10] = np.nan                 # no detection
+    kp[20, JOINT_INDEX["r_wrist"]] = np.nan
+    kp[30, JOINT_INDEX["l_knee"], 2] = 0.05   # low score -> missing
+    cams = list(gt.cameras)
+    cams[5] = None
+    res = lift(cams, kp, clip.fps, segments_m=gt.athlete["segments_m"], config=LiftConfig(smooth_cutoff_hz=None))
+    assert res.status[5] == "no_camera" and np.all(np.isnan(res.joints_track_m[5]))
+    assert res.status[10] == "no_detection"
+    assert res.status[20] == "partial" and np.all(np.isnan(res.joints_track_m[20, JOINT_INDEX["r_wrist"]]))
+    assert np.all(np.isnan(res.joints_track_m[30, JOINT_INDEX["l_knee"]]))
+    assert np.all(np.isfinite(res.joints_track_m[21]))
+
+
+def test_lift_rejects_bad_shapes(exact):
+    clip, gt, j2 = exact
+    with pytest.raises(ValueError, match="shape"):
+        lift(gt.cameras, j2[:, :16], clip.fps)
+    with pytest.raises(ValueError, match="cameras for"):
+        lift(gt.cameras[:5], j2, clip.fps)
+
+
+def test_noisy_lifting_beats_generic_camera(small_clip):
+    clip = load_clip(small_clip)
+    gt = load_groundtruth(small_clip)
+    seg = gt.athlete["segments_m"]
+    res = lift(gt.cameras, clip.keypoints_px, clip.fps, segments_m=seg)
+    true_rel = gt.joints3d_track_m - gt.joints3d_track_m[:, :1]
+    ours = np.nanmean(np.linalg.norm(res.joints_track_m - res.joints_track_m[:, :1] - true_rel, axis=-1))
+    gen = generic_camera_lift(clip.keypoints_px, clip.image_size, seg, clip.fps)
+    theirs = np.nanmean(np.linalg.norm(gen - true_rel, axis=-1))
+    assert ours < theirs and ours < 0.08
+
+
+def test_planar_angle_known_answer():
+    kp = np.zeros((1, 17, 3))
+    kp[0, JOINT_INDEX["r_hip"], :2] = [0, 0]
+    kp[0, JOINT_INDEX["r_knee"], :2] = [0, 10]
+    kp[0, JOINT_INDEX["r_ankle"], :2] = [10, 10]
+    assert np.isclose(planar_knee_angles(kp)["knee_r"][0], 90.0)
+
+
+def test_filters_known_answers(rng):
+    x = np.sin(np.linspace(0, 4 * np.pi, 400))
+    y = butterworth(x + rng.normal(0, 0.2, 400), fps=100.0, cutoff_hz=5.0)
+    assert np.std(y - x) < 0.07
+    assert np.isnan(hampel(np.r_[np.zeros(10), 50.0, np.zeros(10)])[10])
+    g = fill_gaps(np.r_[0.0, np.nan, np.nan, 3.0], max_gap=2)
+    assert np.allclose(g, [0, 1, 2, 3])
+    kp = np.zeros((300, 17, 3))
+    kp[..., :2] = rng.normal(0, 3.0, (300, 17, 2))
+    kp[..., 2] = 1
+    assert 2.0 < keypoint_noise_px(kp) < 4.0
+    kp[100, 5, :2] = 500.0  # an outlier
+    out = clean_keypoints(kp, 50.0)
+    assert np.abs(out[100, 5, :2]).max() < 20
+    assert np.std(out[:, 3, 0]) < np.std(kp[:, 3, 0])
+
+
+def test_lift_command(small_clip, tmp_path):
+    out = tmp_path / "lift"
+    seg = small_clip / "groundtruth" / "athlete.json"
+    assert main(["lift", str(small_clip), "--cameras", str(small_clip / "groundtruth" / "cameras.json"),
+                 "--out", str(out), "--segments", str(seg)]) == 0
+    npz = np.load(out / "joints3d.npz")
+    assert npz["median"].shape == (40, 17, 3) and list(npz["joint_names"])[0] == "pelvis"
+    ang = read_angles_csv(out / "angles.csv")
+    frames, med, lo, hi = ang["knee_l"]
+    assert len(frames) == 40 and np.allclose(lo, med) and np.allclose(hi, med)
+    status = json.loads((out / "lift.json").read_text())["frame_status"]
+    assert len(status) == 40
+    assert main(["lift", str(small_clip), "--cameras", str(tmp_path / "none.json"), "--out", str(out)]) == 2
