@@ -189,10 +189,8 @@ def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: Tr
     # left feet land left of the line of travel, right feet right of it: remove half the
     # step width (estimated from the clip) so that contacts measure the centre line
     half_step = 0.0
+    lat = np.array([0.0, 1.0])  # on the straight the athlete runs along x: lateral is y
     if len(cps) >= 2 and (cps[:, 1] == 0).any() and (cps[:, 1] == 1).any():
-        d = cps[-1, 2:] - cps[0, 2:]
-        n = np.linalg.norm(d)
-        lat = np.array([-d[1], d[0]]) / n if n > 1e-6 else np.array([0.0, 1.0])
         off = cps[:, 2:] @ lat
         half_step = 0.5 * (np.median(off[cps[:, 1] == 0]) - np.median(off[cps[:, 1] == 1]))
         half_step = float(np.clip(half_step, 0.0, 0.25))
@@ -226,9 +224,10 @@ def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: Tr
         v0 = (meas[k1] - meas[k0]) / max((k1 - k0) * dt, dt)
     else:
         v0 = np.zeros(2)
+    v0[1] = 0.0  # athletes follow their lane: start with no lateral velocity
     p0 = meas[keys[0]] - v0 * keys[0] * dt
     kf.x = np.array([p0[0], v0[0], p0[1], v0[1]])
-    kf.P = np.diag([4.0, 4.0, 1.0, 1.0])
+    kf.P = np.diag([4.0, 4.0, 0.5, 0.1**2])
     xs, Ps = np.zeros((F, 4)), np.zeros((F, 4, 4))
     loglik = 0.0
     for i in range(F):
