@@ -8,7 +8,13 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["touchdowns", "gait_cycles", "normalise_cycle", "cycle_curves"]
+__all__ = ["touchdowns", "gait_cycles", "normalise_cycle", "cycle_curves", "gait_summary", "GAIT_FIELDS"]
+
+#: Gait-level numbers running studies report, with units.
+GAIT_FIELDS = {
+    "cadence_spm": "steps/min", "step_length_m": "m", "speed_mps": "m/s", "contact_time_s": "s",
+    "flight_time_s": "s", "peak_knee_flexion_swing_deg": "deg", "knee_flexion_touchdown_deg": "deg",
+}
 
 
 def touchdowns(contact):
@@ -48,3 +54,58 @@ def cycle_curves(signal, contact, n_points=101):
     if not cyc:
         return np.zeros((0, n_points))
     return np.stack([normalise_cycle(signal, a, b, n_points) for a, b in cyc])
+
+
+def _runs(flags):
+    edges = np.diff(np.concatenate([[0], np.asarray(flags, int), [0]]))
+    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)))
+
+
+def gait_summary(track, angles_deg, fps):
+    """Gait-level summary of one lifted clip.
+
+    Parameters
+    ----------
+    track : probreg.trajectory.GroundTrack
+        Contacts (F, 2) ``[left, right]`` and the smoothed ground track.
+    angles_deg : dict
+        Joint angles (``knee_l``, ``knee_r``), each (F,).
+    fps : float
+
+    Returns
+    -------
+    dict
+        Keys of :data:`GAIT_FIELDS`; NaN where the clip does not show enough steps.
+        Contacts touching the clip's ends are not counted as whole contacts.
+    """
+    c = np.asarray(track.contacts, bool)
+    F = len(c)
+    tds, contact_times = [], []
+    peak, at_td = [], []
+    for side, knee in ((0, "knee_l"), (1, "knee_r")):
+        runs = _runs(c[:, side])
+        kn = np.asarray(angles_deg[knee], float)
+        for k, (a, b) in enumerate(runs):
+            if a > 0:
+                tds.append(a)
+                at_td.append(kn[a])
+            if a > 0 and b < F:
+                contact_times.append((b - a) / fps)
+            if k + 1 < len(runs) and b < F:
+                swing = kn[b:runs[k + 1][0]]
+                if len(swing) and np.isfinite(swing).any():
+                    peak.append(np.nanmax(swing))
+    tds = np.sort(np.array(tds))
+    step_s = float(np.median(np.diff(tds)) / fps) if len(tds) >= 2 else float("nan")
+    speed = float(np.nanmedian(np.linalg.norm(track.velocity_mps, axis=1)))
+    contact = float(np.mean(contact_times)) if contact_times else float("nan")
+    with np.errstate(invalid="ignore"):
+        return {
+            "cadence_spm": 60.0 / step_s if step_s > 0 else float("nan"),
+            "step_length_m": speed * step_s,
+            "speed_mps": speed,
+            "contact_time_s": contact,
+            "flight_time_s": step_s - contact,
+            "peak_knee_flexion_swing_deg": float(np.nanmean(peak)) if peak else float("nan"),
+            "knee_flexion_touchdown_deg": float(np.nanmean(at_td)) if at_td else float("nan"),
+        }

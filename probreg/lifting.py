@@ -177,7 +177,7 @@ def estimate_segments(cameras, keypoints_px, track: GroundTrack | None = None, f
     kp = np.asarray(keypoints_px, float)
     cams = cameras if isinstance(cameras, CameraArrays) else camera_arrays(cameras)
     if track is None:
-        track = fit_ground_track(cameras, kp, fps)
+        track = fit_ground_track(cams, kp, fps)
     point = np.column_stack([track.position_m, np.zeros(len(kp))])
     rays = pixel_rays(cams, kp[..., :2])
     P = _plane_hits(cams.C, rays, point, track.left)
@@ -308,11 +308,8 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
     cams = cameras if isinstance(cameras, CameraArrays) else camera_arrays(cameras)
     if len(cams.valid) != F:
         raise ValueError(f"{len(cams.valid)} cameras for {F} frames of keypoints")
-    cam_list = cameras if not isinstance(cameras, CameraArrays) else None
     if track is None:
-        if cam_list is None:
-            raise ValueError("pass a GroundTrack together with CameraArrays")
-        track = fit_ground_track(cam_list, kp, fps, ankle_height_m=config.ankle_height_m)
+        track = fit_ground_track(cams, kp, fps, ankle_height_m=config.ankle_height_m)
     if segments_m is None:
         segments_m = estimate_segments(cams, kp, track, fps)
     seg = {k: float(v) for k, v in segments_m.items()}

@@ -94,16 +94,14 @@ class GroundTrack:
 
 
 def _rays(cameras, pts_px):
-    """Per-frame rays: origins (F, 3) and unit directions (F, K, 3); NaN where no camera."""
-    F, K = pts_px.shape[:2]
-    origins = np.full((F, 3), np.nan)
-    dirs = np.full((F, K, 3), np.nan)
-    for i, cam in enumerate(cameras):
-        if cam is None:
-            continue
-        origins[i] = cam.C
-        dirs[i] = cam.rays_from_pixels(pts_px[i])
-    return origins, dirs
+    """Per-frame rays: origins (F, 3) and unit directions (F, K, 3); NaN where no camera.
+
+    ``cameras`` is a list of Camera/None or a :class:`probreg.lifting.CameraArrays`.
+    """
+    from .lifting import CameraArrays, camera_arrays, pixel_rays
+
+    arr = cameras if isinstance(cameras, CameraArrays) else camera_arrays(cameras)
+    return arr.C, pixel_rays(arr, pts_px)
 
 
 def cast_ankles(cameras, keypoints_px, ankle_height_m=0.07):
@@ -117,27 +115,39 @@ def cast_ankles(cameras, keypoints_px, ankle_height_m=0.07):
 
 
 def detect_contacts(ankles_m, fps, config: TrackConfig = TrackConfig()):
-    """Contact flags ``[left, right]`` (F, 2) from the speed of the cast ankles."""
+    """Contact flags ``[left, right]`` (F, 2) from the along-track speed of the cast ankles.
+
+    Only the component along the running direction is used: across the track
+    (in depth, for a broadcast camera) a cast point inherits the keypoint noise
+    amplified by the grazing view of the ground, along the track it does not.
+    """
     F = len(ankles_m)
     xy = ankles_m[..., :2]
-    speed = np.full((F, 2), np.nan)
-    if F >= 3:
-        speed[1:-1] = np.linalg.norm(xy[2:] - xy[:-2], axis=-1) * fps / 2
-    # typical running speed: the median speed of the athlete (mean of both feet ~ body)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN frames stay NaN
         body = np.nanmean(xy, axis=1)
+    ok = np.all(np.isfinite(body), -1)
+    direction = np.array([1.0, 0.0])
+    if ok.sum() >= 2:
+        d = body[np.flatnonzero(ok)[-1]] - body[np.flatnonzero(ok)[0]]
+        if np.linalg.norm(d) > 1e-6:
+            direction = d / np.linalg.norm(d)
+    along = xy @ direction  # (F, 2)
+    # 5-frame smoothed central difference (nan-aware): speed along the track
+    speed = np.full((F, 2), np.nan)
+    if F >= 5:
+        speed[2:-2] = (along[4:] - along[:-4]) * fps / 4
+    elif F >= 3:
+        speed[1:-1] = (along[2:] - along[:-2]) * fps / 2
     with np.errstate(invalid="ignore"):
-        run = np.nanmedian(np.linalg.norm(np.diff(body, axis=0), axis=-1)) * fps if F > 1 else np.nan
+        run = np.nanmedian(np.abs(np.diff(body @ direction))) * fps if ok.sum() > 1 else np.nan
+        run = np.nanmedian(np.abs(speed)) if not np.isfinite(run) else run
     thr = config.contact_speed_frac * run if np.isfinite(run) and run > 0.5 else 1.0
     with np.errstate(invalid="ignore"):
-        contact = speed < thr
-    # the foot on the ground is the lower one: when both look still, keep the nearer cast
+        contact = np.abs(speed) < thr
     out = np.zeros((F, 2), bool)
     for s in (0, 1):
-        c = contact[:, s]
-        # drop runs shorter than the minimum
-        edges = np.diff(np.concatenate([[0], c.astype(int), [0]]))
+        edges = np.diff(np.concatenate([[0], contact[:, s].astype(int), [0]]))
         for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
             if b - a >= config.min_contact_frames:
                 out[a:b, s] = True
@@ -166,7 +176,7 @@ def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: Tr
 
     Parameters
     ----------
-    cameras : list of Camera or None, length F
+    cameras : list of Camera or None (length F), or CameraArrays
     keypoints_px : ndarray, shape (F, 17, 3)
         H36M-17 keypoints; NaN = missing.
     fps : float

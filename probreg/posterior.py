@@ -1,0 +1,467 @@
+"""The Bayesian clip model: posterior over the one-DOF calibration and the limb lengths.
+
+Parameters (one clip, one static camera):
+
+``log_height``
+    log of the camera height (m): selects the family member in every frame.
+``stature``
+    the athlete's stature (m).
+``m_<segment>``
+    multipliers of the anthropometric segment proportions (thigh, shank,
+    upper arm, forearm, trunk, hip width, shoulder width); segment length =
+    stature x proportion x multiplier.
+
+Likelihood (every term a function of the height; the limb terms also of the lengths):
+
+* static camera: the family members at one height must share one camera
+  position; the spread of their lateral positions over the clip (lane-line
+  evidence that survives the per-frame one-DOF freedom) is scored with a
+  Student-t;
+* the ground-contact trajectory: the Kalman filter's marginal
+  log-likelihood of the contact points (a runner's path is smooth; a wrong
+  height stretches and bends it);
+* keypoints: the limb lengths measured in the sagittal plane at this height
+  (the quantity the ray-sphere misses of the lifting depend on: a limb whose
+  sphere is smaller than its keypoints' in-plane distance is missed) against
+  the parameter lengths, with the measurement's standard error.
+
+The height-dependent statistics are precomputed on a grid of heights and
+interpolated, so the log-probability is vectorised over walkers and costs
+microseconds; ``emcee`` runs until the chain is 50 integrated
+autocorrelation times long (or a budget is spent).  Every kept draw is then
+*propagated*: cameras at its height, ground track, lifting with its limb
+lengths and with detector noise re-simulated (parametric bootstrap of the
+keypoints), giving joint and angle samples and so credible bands.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+
+import numpy as np
+
+from .filtering import clean_keypoints
+from .kinematics import gait_summary
+from .lifting import CameraArrays, LiftConfig, estimate_segments, lift
+from .priors import SEGMENT_PROPORTIONS, ModelPriors
+from .registration import ClipRegistration, athlete_ground_track
+from .skeleton import ANGLE_NAMES, JOINT_INDEX
+from .trajectory import fit_ground_track
+
+__all__ = ["ClipModel", "SamplerSettings", "PosteriorResult", "noise_model", "PARAM_NAMES"]
+
+SEGMENTS = ("thigh", "shank", "upper_arm", "forearm", "trunk", "hip_width", "shoulder_width")
+OBSERVED_SEGMENTS = ("thigh", "shank", "upper_arm", "forearm", "trunk")
+PARAM_NAMES = ["log_height", "stature"] + [f"m_{s}" for s in SEGMENTS]
+
+
+def noise_model(keypoints_px, joints=(0, 7, 8)):
+    """Detector noise of a clip: per-coordinate sd (px) and frame-to-frame correlation.
+
+    Uses the trunk joints relative to the pelvis (camera motion cancels, the
+    trunk's own motion over a few frames is small).  For AR(1) noise with sd
+    ``s`` and lag-1 correlation ``r``, differences over ``k`` frames have
+    variance ``2 s^2 (1 - r^k)`` (doubled again for the difference of two
+    joints); lags 1 and 2 give ``r = v2 / v1 - 1`` and then ``s``.  Robust
+    (MAD) variances keep detector outliers out.
+
+    Returns
+    -------
+    sd_px : float
+    rho : float
+    """
+    kp = np.asarray(keypoints_px, float)[:, list(joints), :2]
+    rel = kp[:, 1:] - kp[:, :1]
+
+    def robust_var(k):
+        d = rel[k:] - rel[:-k]
+        d = d[np.isfinite(d)]
+        return (1.4826 * np.median(np.abs(d))) ** 2 / 2 if len(d) >= 20 else np.nan
+
+    v1, v2 = robust_var(1), robust_var(2)
+    if not (np.isfinite(v1) and np.isfinite(v2)) or v1 <= 0:
+        return float("nan"), 0.0
+    rho = float(np.clip(v2 / v1 - 1.0, 0.0, 0.9))
+    return float(np.sqrt(v1 / (2 * (1 - rho)))), rho
+
+
+@dataclass(frozen=True)
+class SamplerSettings:
+    """Sampling budget and propagation size."""
+
+    n_walkers: int = 24
+    tau_multiple: float = 50.0
+    max_steps: int = 4000
+    chunk: int = 250
+    burn_in: int = 200
+    n_draws: int = 60
+    bootstrap_noise: bool = True
+    seed: int = 0
+
+
+@dataclass
+class PosteriorResult:
+    """Everything the model produced for a clip."""
+
+    chain: np.ndarray               # (steps, walkers, D) after burn-in
+    log_prob: np.ndarray            # (steps, walkers)
+    acceptance: float
+    tau: np.ndarray                 # (D,)
+    draws: np.ndarray               # (S, D) propagated draws
+    joints_samples: np.ndarray      # (S, F, 17, 3)
+    angle_samples: dict             # name -> (S, F)
+    gait_samples: dict              # name -> (S,)
+    diagnostics: dict = field(default_factory=dict)
+    timings: dict = field(default_factory=dict)
+
+    def height_samples(self):
+        return np.exp(self.chain[..., 0]).ravel()
+
+    def angle_summary(self, lo=5.0, hi=95.0):
+        """Per angle: median, lo, hi quantiles over samples, each (F,)."""
+        import warnings
+
+        out = {}
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            for k, v in self.angle_samples.items():
+                out[k] = (np.nanmedian(v, 0), np.nanpercentile(v, lo, 0), np.nanpercentile(v, hi, 0))
+        return out
+
+
+class ClipModel:
+    """Posterior of one clip: built from a registration and the (raw) keypoints.
+
+    Parameters
+    ----------
+    registration : ClipRegistration
+    keypoints_px : ndarray (F, 17, 3)
+        Raw H36M keypoints (NaN = missing).
+    fps : float
+    athlete_lane : int or None
+    priors : ModelPriors
+    dist : array_like (5,), optional
+        Known lens distortion.
+    n_grid : int
+        Heights on which the height-dependent statistics are precomputed.
+
+    Raises
+    ------
+    ValueError
+        If no frame has lanes, or no height of the prior's range gives cameras.
+    """
+
+    def __init__(self, registration: ClipRegistration, keypoints_px, fps, athlete_lane=None,
+                 priors: ModelPriors = ModelPriors(), dist=None, n_grid=36, branch="narrow"):
+        t0 = time.perf_counter()
+        self.reg = registration
+        self.fps = float(fps)
+        self.priors = priors
+        self.dist = None if dist is None else np.asarray(dist, float)
+        self.athlete_lane = athlete_lane
+        self.raw = np.asarray(keypoints_px, float)
+        self.kp = clean_keypoints(self.raw, self.fps)
+        self.noise_sd, self.noise_rho = noise_model(self.raw)
+        self.F = len(self.kp)
+        self.branch = branch
+        self._build_branches()
+        if not self.valid.any():
+            raise ValueError("no frame has a usable calibration family (no lanes found)")
+        lo, hi = self.height_range
+        plo, phi = priors.camera_height.interval(0.998)
+        g_lo, g_hi = max(lo, plo), min(hi, phi)
+        if not g_hi > g_lo:
+            raise ValueError(f"the prior's camera heights ({plo:.1f}-{phi:.1f} m) do not overlap the "
+                             f"heights the lanes allow ({lo:.1f}-{hi:.1f} m)")
+        self.h_ref = float(np.clip(priors.camera_height.centre(), g_lo, g_hi))
+        self._fix_offsets()
+        self.grid = np.geomspace(g_lo, g_hi, n_grid)
+        self._precompute()
+        self.timings = {"precompute_s": time.perf_counter() - t0}
+
+    # ------------------------------------------------------------------ cameras as a function of h
+    def _build_branches(self, n=500):
+        """Per frame: the family on a dense focal grid, restricted to one branch, as arrays."""
+        fams = self.reg.sequence.families
+        self.valid = np.array([f is not None for f in fams])
+        w = self.reg.image_size[0]
+        self.logf = np.full((self.F, n), np.nan)
+        self.h = np.full((self.F, n), np.nan)
+        self.y = np.full((self.F, n), np.nan)
+        self.R = np.full((self.F, n, 3, 3), np.nan)
+        self.pp = np.tile([(self.reg.image_size[0] - 1) / 2, (self.reg.image_size[1] - 1) / 2], (self.F, 1))
+        self.flip = np.zeros(self.F, bool)
+        lo, hi = np.inf, -np.inf
+        from .camera import focal_from_fov
+
+        fgrid = np.geomspace(focal_from_fov(150.0, w), focal_from_fov(0.3, w), n)
+        for i, fam in enumerate(fams):
+            if fam is None:
+                continue
+            m = fam.members(fgrid)
+            ok = m["valid"] & np.isfinite(m["height_m"])
+            if ok.sum() < 3:
+                self.valid[i] = False
+                continue
+            hh = np.where(ok, m["height_m"], np.nan)
+            k = int(np.nanargmax(hh))
+            sl = slice(k, n) if self.branch == "narrow" else slice(0, k + 1)
+            self.logf[i, sl] = np.log(fgrid[sl])
+            self.h[i, sl] = hh[sl]
+            self.y[i, sl] = m["y_m"][sl]
+            self.R[i, sl] = m["R"][sl]
+            self.pp[i] = fam.principal_point
+            self.flip[i] = bool(np.median(m["index_flipped"][ok]))
+            seg = hh[sl]
+            lo, hi = min(lo, np.nanmin(seg)), max(hi, np.nanmax(seg))
+        self.height_range = (lo, hi)
+
+    def cameras_at(self, height_m, offsets=None):
+        """Per-frame cameras of the family member at ``height_m`` as CameraArrays."""
+        F = self.F
+        valid = self.valid.copy()
+        f = np.full(F, np.nan)
+        y = np.full(F, np.nan)
+        R = np.full((F, 3, 3), np.nan)
+        for i in np.flatnonzero(self.valid):
+            hh = self.h[i]
+            ok = np.isfinite(hh)
+            hv, lf = hh[ok], self.logf[i, ok]
+            order = np.argsort(hv)
+            hs = hv[order]
+            if not hs[0] <= height_m <= hs[-1]:
+                valid[i] = False
+                continue
+            j = int(np.clip(np.searchsorted(hs, height_m), 1, len(hs) - 1))
+            a, b = order[j - 1], order[j]
+            t = (height_m - hv[a]) / (hv[b] - hv[a]) if hv[b] != hv[a] else 0.0
+            idx = np.flatnonzero(ok)
+            ia, ib = idx[a], idx[b]
+            f[i] = np.exp(self.logf[i, ia] + t * (self.logf[i, ib] - self.logf[i, ia]))
+            y[i] = self.y[i, ia] + t * (self.y[i, ib] - self.y[i, ia])
+            Rm = self.R[i, ia] + t * (self.R[i, ib] - self.R[i, ia])
+            u, _, vt = np.linalg.svd(Rm)
+            R[i] = u @ vt  # nearest rotation
+        off = self.offsets if offsets is None else offsets
+        C = np.column_stack([np.zeros(F), y - self.reg.lane_width_m * off, np.full(F, height_m)])
+        C[~valid] = np.nan
+        return CameraArrays(valid=valid, C=C, R=R, focal_px=f, principal_px=self.pp,
+                            dist=np.zeros(5) if self.dist is None else self.dist)
+
+    def _fix_offsets(self):
+        """Lane-index offsets (frame to frame and to the athlete's lane) at the reference height."""
+        reg = self.reg
+        seq = reg.sequence
+        seq.branch = self.branch
+        base = reg._track_offsets(seq, self.h_ref)
+        self.offsets = np.asarray(base, int)
+        cams = self.cameras_at(self.h_ref, offsets=self.offsets)
+        track = athlete_ground_track(_as_list(cams), self.kp)
+        ok = np.all(np.isfinite(track), -1)
+        if ok.any():
+            w = reg.lane_width_m
+            yv = float(np.median(track[ok, 1]))
+            lane = self.athlete_lane if self.athlete_lane is not None else int(np.floor(-yv / w)) + 1
+            self.offsets = self.offsets + int(np.round((yv + w * (lane - 0.5)) / w))
+
+    # ------------------------------------------------------------------ likelihood on a grid
+    def _precompute(self):
+        G = len(self.grid)
+        self.ll_track = np.full(G, -np.inf)
+        self.ll_static = np.full(G, -np.inf)
+        self.seg_obs = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
+        self.seg_se = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
+        self.tracks = []
+        for g, h in enumerate(self.grid):
+            cams = self.cameras_at(h)
+            if cams.valid.sum() < 3:
+                self.tracks.append(None)
+                continue
+            tr = fit_ground_track(cams, self.kp, self.fps)
+            self.tracks.append(tr)
+            self.ll_track[g] = tr.log_likelihood if np.isfinite(tr.log_likelihood) else -1e6
+            ys = cams.C[cams.valid, 1]
+            resid = ys - np.median(ys)
+            # Student-t (nu = 4) on the lateral position of the static camera, scale 3 cm
+            self.ll_static[g] = float(np.sum(-2.5 * np.log1p((resid / 0.03) ** 2 / 4)))
+            self._segment_stats(g, cams, tr)
+
+    def _segment_stats(self, g, cams, tr):
+        from .lifting import _plane_hits, pixel_rays
+        from .skeleton import SEGMENT_BONES
+
+        J = JOINT_INDEX
+        point = np.column_stack([tr.position_m, np.zeros(self.F)])
+        P = _plane_hits(cams.C, pixel_rays(cams, self.kp[..., :2]), point, tr.left)
+        depth = np.linalg.norm(P[:, J["pelvis"]] - cams.C, axis=-1)
+        sd_m = np.nanmedian(self.noise_sd * depth / cams.focal_px) if np.isfinite(self.noise_sd) else 0.0
+        for s in OBSERVED_SEGMENTS:
+            lens = np.concatenate([np.linalg.norm(P[:, J[b]] - P[:, J[a]], axis=-1) for a, b in SEGMENT_BONES[s]])
+            lens = lens[np.isfinite(lens)]
+            if len(lens) < 10:
+                continue
+            obs = float(np.percentile(lens, 60))
+            # remove the length that keypoint noise adds to a distance (2 joints, 2-D)
+            obs = float(np.sqrt(max(obs**2 - 2 * sd_m**2, (0.5 * obs) ** 2)))
+            mad = 1.4826 * np.median(np.abs(lens - np.median(lens)))
+            n_eff = max(len(lens) / 10.0, 1.0)  # frames are strongly correlated
+            self.seg_obs[s][g] = obs
+            self.seg_se[s][g] = float(np.hypot(mad / np.sqrt(n_eff), 0.02 * obs))
+
+    def _interp(self, arr, log_h):
+        return np.interp(log_h, np.log(self.grid), arr, left=np.nan, right=np.nan)
+
+    # ------------------------------------------------------------------ the log-probability
+    def lengths(self, theta):
+        """Segment lengths (m) of parameter vectors (W, D): dict seg -> (W,)."""
+        theta = np.atleast_2d(theta)
+        st = theta[:, 1]
+        return {s: st * SEGMENT_PROPORTIONS[s] * theta[:, 2 + k] for k, s in enumerate(SEGMENTS)}
+
+    def log_prior(self, theta):
+        theta = np.atleast_2d(theta)
+        h = np.exp(theta[:, 0])
+        lp = self.priors.camera_height.logpdf(h) + theta[:, 0]  # Jacobian of h = exp(log h)
+        lp = lp + self.priors.stature.logpdf(theta[:, 1])
+        sd = self.priors.proportion_sd
+        lp = lp + np.sum(-0.5 * ((theta[:, 2:] - 1.0) / sd) ** 2, axis=1)
+        lp = np.where((theta[:, 1] > 0.5) & np.all(theta[:, 2:] > 0.5, axis=1), lp, -np.inf)
+        return lp
+
+    def log_likelihood(self, theta):
+        theta = np.atleast_2d(theta)
+        lh = theta[:, 0]
+        ll = self._interp(self.ll_track, lh) + self._interp(self.ll_static, lh)
+        L = self.lengths(theta)
+        for s in OBSERVED_SEGMENTS:
+            obs = self._interp(self.seg_obs[s], lh)
+            se = self._interp(self.seg_se[s], lh)
+            term = -0.5 * ((obs - L[s]) / se) ** 2 - np.log(se)
+            ll = ll + np.where(np.isfinite(term), term, 0.0)
+        return np.where(np.isfinite(ll), ll, -np.inf)
+
+    def log_prob(self, theta):
+        """Vectorised log-posterior: theta (W, D) -> (W,)."""
+        lp = self.log_prior(theta)
+        out = np.full(len(lp), -np.inf)
+        ok = np.isfinite(lp)
+        if ok.any():
+            out[ok] = lp[ok] + self.log_likelihood(np.atleast_2d(theta)[ok])
+        return np.where(np.isfinite(out), out, -np.inf)
+
+    # ------------------------------------------------------------------ sampling
+    def initial_walkers(self, n, rng):
+        """Walkers around the best grid height with lengths at their observed values."""
+        theta_grid = []
+        for g, h in enumerate(self.grid):
+            st = self.priors.stature.centre()
+            th = np.r_[np.log(h), st, np.ones(len(SEGMENTS))]
+            theta_grid.append(th)
+        lp = self.log_prob(np.array(theta_grid))
+        g = int(np.nanargmax(np.where(np.isfinite(lp), lp, -np.inf)))
+        base = theta_grid[g]
+        # stature from the observed thigh + shank at that height, if available
+        obs = np.nanmean([self.seg_obs[s][g] / SEGMENT_PROPORTIONS[s] for s in ("thigh", "shank")])
+        if np.isfinite(obs):
+            base[1] = obs
+        step = np.log(self.grid[1] / self.grid[0]) if len(self.grid) > 1 else 0.05
+        p0 = base + rng.normal(0, 1, (n, len(base))) * np.r_[step, 0.02, np.full(len(SEGMENTS), 0.02)]
+        return p0
+
+    def sample(self, settings: SamplerSettings = SamplerSettings(), progress=None):
+        """Run emcee; returns (chain after burn-in, log-probs, acceptance, tau, diagnostics)."""
+        import emcee
+
+        rng = np.random.default_rng(settings.seed)
+        D = len(PARAM_NAMES)
+        p0 = self.initial_walkers(settings.n_walkers, rng)
+        sampler = emcee.EnsembleSampler(settings.n_walkers, D, self.log_prob, vectorize=True)
+        sampler.random_state = np.random.RandomState(settings.seed).get_state()  # reproducible moves
+        t0 = time.perf_counter()
+        state = sampler.run_mcmc(p0, settings.burn_in, progress=False)
+        sampler.reset()
+        tau = np.full(D, np.inf)
+        steps = 0
+        while steps < settings.max_steps:
+            state = sampler.run_mcmc(state, settings.chunk, progress=False)
+            steps += settings.chunk
+            tau = sampler.get_autocorr_time(tol=0)
+            if np.all(np.isfinite(tau)) and steps >= settings.tau_multiple * np.max(tau):
+                break
+        self.timings["sampling_s"] = time.perf_counter() - t0
+        self.sampler = sampler
+        return sampler, tau
+
+    # ------------------------------------------------------------------ propagation
+    def propagate(self, draws, rng, bootstrap_noise=True, config: LiftConfig = LiftConfig()):
+        """Lift the clip for every draw: joints (S, F, 17, 3), angles {name: (S, F)}, gait {name: (S,)}."""
+        t0 = time.perf_counter()
+        S = len(draws)
+        joints = np.full((S, self.F, 17, 3), np.nan, np.float32)
+        angles = {k: np.full((S, self.F), np.nan) for k in ANGLE_NAMES}
+        gait = {}
+        cfg = LiftConfig(**{**config.__dict__, "smooth_cutoff_hz": None})
+        L = self.lengths(draws)
+        per_joint = self._joint_noise_scale()
+        for s in range(S):
+            h = float(np.exp(draws[s, 0]))
+            cams = self.cameras_at(h)
+            kp = self.kp
+            if bootstrap_noise and np.isfinite(self.noise_sd) and self.noise_sd > 0:
+                # parametric bootstrap: the smoothed keypoints plus re-simulated detector noise,
+                # cleaned again exactly as the data were
+                noisy = self.kp.copy()
+                noisy[..., :2] += (_ar1_noise(rng, self.kp.shape[:2] + (2,), self.noise_sd, self.noise_rho)
+                                   * per_joint[None, :, None])
+                kp = clean_keypoints(noisy, self.fps)
+            tr = fit_ground_track(cams, kp, self.fps)
+            seg = {k: float(v[s]) for k, v in L.items()}
+            res = lift(cams, kp, self.fps, segments_m=seg, track=tr, config=cfg)
+            joints[s] = res.joints_track_m
+            a = res.angles_deg()
+            for k in ANGLE_NAMES:
+                angles[k][s] = a[k]
+            for k, v in gait_summary(res.track, a, self.fps).items():
+                gait.setdefault(k, np.full(S, np.nan))[s] = v
+        self.timings["propagation_s"] = time.perf_counter() - t0
+        return joints, angles, gait
+
+    def _joint_noise_scale(self):
+        """Relative noise of each joint (trunk = 1) from the high-frequency residuals."""
+        resid = self.raw[..., :2] - self.kp[..., :2]
+        rms = np.sqrt(np.nanmean(resid**2, axis=(0, 2)))
+        trunk = np.nanmean(rms[[JOINT_INDEX["pelvis"], JOINT_INDEX["spine"], JOINT_INDEX["thorax"]]])
+        scale = rms / trunk if np.isfinite(trunk) and trunk > 0 else np.ones(17)
+        return np.where(np.isfinite(scale), np.clip(scale, 0.5, 3.0), 1.0)
+
+    def estimate_segments_at(self, h):
+        cams = self.cameras_at(h)
+        return estimate_segments(cams, self.kp, fit_ground_track(cams, self.kp, self.fps), self.fps)
+
+
+def _ar1_noise(rng, shape, sd, rho):
+    """AR(1) noise along axis 0 with marginal sd ``sd``."""
+    e = rng.standard_normal(shape)
+    out = np.empty(shape)
+    out[0] = e[0]
+    c = np.sqrt(1 - rho**2)
+    for t in range(1, shape[0]):
+        out[t] = rho * out[t - 1] + c * e[t]
+    return out * sd
+
+
+def _as_list(cams: CameraArrays):
+    """CameraArrays -> list of Camera/None (for functions that take Camera objects)."""
+    from .camera import Camera
+
+    out = []
+    for i in range(len(cams.valid)):
+        if not cams.valid[i]:
+            out.append(None)
+            continue
+        f = cams.focal_px[i]
+        K = np.array([[f, 0, cams.principal_px[i, 0]], [0, f, cams.principal_px[i, 1]], [0, 0, 1.0]])
+        out.append(Camera(K=K, R=cams.R[i], C=cams.C[i], dist=cams.dist))
+    return out
+
