@@ -58,7 +58,28 @@ def _cmd_synth(args):
     return 0
 
 
+def _run_options(args):
+    from .pipeline import RunOptions
+    from .posterior import SamplerSettings
+    from .priors import ModelPriors
+
+    priors = ModelPriors.from_options(height=args.height_m, height_sd=args.height_log_sd,
+                                      stature=args.stature, stature_sd=args.stature_sd)
+    sampler = SamplerSettings(n_walkers=args.walkers, max_steps=args.max_steps, n_draws=args.draws,
+                              seed=args.seed)
+    return RunOptions(priors=priors, sampler=sampler, dist=_parse_dist(args.dist), min_score=args.min_score)
+
+
+def _cmd_run(args):
+    from .pipeline import run_clip
+
+    run_clip(args.clip, args.out, _run_options(args))
+    print(f"results: {args.out}")
+    return 0
+
+
 def _cmd_demo(args):
+    from .pipeline import run_clip
     from .report import clip_report
     from .synth import config_from_preset, synthesize, write_clip
 
@@ -67,8 +88,10 @@ def _cmd_demo(args):
     cfg = config_from_preset(args.preset, args.seed, n_frames=args.frames)
     clip = synthesize(cfg, seed=args.seed, preset=args.preset)
     clip_dir = write_clip(clip, out / "clip", images=True, jobs=args.jobs, overwrite=True)
-    report = clip_report(clip_dir, out / "report.html")
-    print(f"synthetic clip: {clip_dir}\nreport: {report}")
+    clip_report(clip_dir, out / "clip_report.html")
+    run_clip(clip_dir, out / "result", _run_options(args))
+    print(f"synthetic clip: {clip_dir}\nresults and report: {out / 'result'} (report.html); "
+          f"ground truth overview: {out / 'clip_report.html'}")
     return 0
 
 
@@ -167,6 +190,22 @@ def _cmd_bench(args):
     return 0
 
 
+def _add_run_options(p):
+    g = p.add_argument_group("model and sampling")
+    g.add_argument("--height-m", type=float, default=None, help="camera height prior median (m); default 12")
+    g.add_argument("--height-log-sd", type=float, default=None,
+                   help="log-sd of the height prior (default 0.5; 0.05 when --height-m is given)")
+    g.add_argument("--stature", type=float, default=None, help="athlete's stature prior mean (m); default 1.76")
+    g.add_argument("--stature-sd", type=float, default=None, help="stature prior sd (m); default 0.10")
+    g.add_argument("--walkers", type=int, default=24)
+    g.add_argument("--max-steps", type=int, default=4000, help="sampling budget (steps after burn-in)")
+    g.add_argument("--draws", type=int, default=60, help="posterior draws propagated to angles")
+    g.add_argument("--dist", default=None, help="known lens distortion k1,k2,p1,p2,k3 (use --dist=...)")
+    g.add_argument("--min-score", type=float, default=0.3)
+    if not any(a.dest == "seed" for a in p._actions):
+        g.add_argument("--seed", type=int, default=0)
+
+
 def build_parser():
     p = argparse.ArgumentParser(prog="probreg", description=__doc__.split("\n")[0])
     from . import __version__
@@ -196,7 +235,14 @@ def build_parser():
     d.add_argument("--seed", type=int, default=0)
     d.add_argument("--frames", type=int, default=250)
     d.add_argument("--jobs", type=int, default=None)
+    _add_run_options(d)
     d.set_defaults(func=_cmd_demo)
+
+    r = sub.add_parser("run", help="the whole pipeline: frames -> lanes -> family -> posterior -> angles")
+    r.add_argument("clip", type=Path)
+    r.add_argument("--out", type=Path, required=True)
+    _add_run_options(r)
+    r.set_defaults(func=_cmd_run)
 
     c = sub.add_parser("calibrate", help="lanes -> vanishing point -> one-DOF camera family -> cameras")
     c.add_argument("clip", type=Path)

@@ -145,6 +145,10 @@ class ClipModel:
         Known lens distortion.
     n_grid : int
         Heights on which the height-dependent statistics are precomputed.
+    track_weight : float
+        Weight of the ground-track filter's (per-contact) log-likelihood.  Its
+        absolute values depend on unmodelled effects (foot placement, detector
+        noise in depth), so it enters damped; 1 uses it at face value.
 
     Raises
     ------
@@ -153,7 +157,8 @@ class ClipModel:
     """
 
     def __init__(self, registration: ClipRegistration, keypoints_px, fps, athlete_lane=None,
-                 priors: ModelPriors = ModelPriors(), dist=None, n_grid=36, branch="narrow"):
+                 priors: ModelPriors = ModelPriors(), dist=None, n_grid=36, branch="narrow",
+                 track_weight=0.2):
         t0 = time.perf_counter()
         self.reg = registration
         self.fps = float(fps)
@@ -165,6 +170,7 @@ class ClipModel:
         self.noise_sd, self.noise_rho = noise_model(self.raw)
         self.F = len(self.kp)
         self.branch = branch
+        self.track_weight = float(track_weight)
         self._build_branches()
         if not self.valid.any():
             raise ValueError("no frame has a usable calibration family (no lanes found)")
@@ -177,7 +183,20 @@ class ClipModel:
         self.h_ref = float(np.clip(priors.camera_height.centre(), g_lo, g_hi))
         self._fix_offsets()
         self.grid = np.geomspace(g_lo, g_hi, n_grid)
+        # two passes: contacts and lane offsets detected at a wrong height are wrong (a 50 %
+        # error distorts the cast feet), so the first pass finds a reference height from
+        # the limb lengths and the static camera alone, the second scores every term there
         self._precompute()
+        theta = np.column_stack([np.log(self.grid), np.full(n_grid, priors.stature.centre()),
+                                 np.ones((n_grid, len(SEGMENTS)))])
+        saved = self.track_weight
+        self.track_weight = 0.0
+        lp = self.log_prob(theta)
+        self.track_weight = saved
+        if np.isfinite(lp).any():
+            self.h_ref = float(self.grid[int(np.nanargmax(np.where(np.isfinite(lp), lp, -np.inf)))])
+            self._fix_offsets()
+            self._precompute()
         self.timings = {"precompute_s": time.perf_counter() - t0}
 
     # ------------------------------------------------------------------ cameras as a function of h
@@ -273,18 +292,33 @@ class ClipModel:
         self.seg_obs = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
         self.seg_se = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
         self.tracks = []
+        # contacts are detected once (reference height) so every hypothesis is scored on the
+        # same measurements; the filter's noise scales with the hypothesis (scale ~ height)
+        ref = fit_ground_track(self.cameras_at(self.h_ref), self.kp, self.fps)
+        self.contacts = ref.contacts
+        n_frames = max(int(self.valid.sum()), 1)
         for g, h in enumerate(self.grid):
             cams = self.cameras_at(h)
             if cams.valid.sum() < 3:
                 self.tracks.append(None)
                 continue
-            tr = fit_ground_track(cams, self.kp, self.fps)
+            tr = fit_ground_track(cams, self.kp, self.fps, contacts=self.contacts,
+                                  length_scale=h / self.h_ref)
             self.tracks.append(tr)
-            self.ll_track[g] = tr.log_likelihood if np.isfinite(tr.log_likelihood) else -1e6
+            # tempered to one contact's worth: the filter's innovations are not independent
+            # (the same feet, seen through one camera path), and its value under wrong
+            # heights is dominated by unmodelled effects; undamped it would swamp every
+            # other term by hundreds of nats
+            n_meas = max(len(tr.contact_points_m), 1)
+            self.ll_track[g] = tr.log_likelihood / n_meas if np.isfinite(tr.log_likelihood) else -1e3
+            # static camera: one lateral position for all frames.  Residuals relative to the
+            # camera-athlete distance (scale-free), Student-t (nu = 4) with scale 0.3 %,
+            # tempered for the correlation of neighbouring frames (~10 frames)
             ys = cams.C[cams.valid, 1]
-            resid = ys - np.median(ys)
-            # Student-t (nu = 4) on the lateral position of the static camera, scale 3 cm
-            self.ll_static[g] = float(np.sum(-2.5 * np.log1p((resid / 0.03) ** 2 / 4)))
+            dist = np.abs(np.median(ys) - np.nanmedian(tr.position_m[:, 1]))
+            resid = (ys - np.median(ys)) / max(dist, 1.0)
+            self.ll_static[g] = float(np.sum(-2.5 * np.log1p((resid / 0.003) ** 2 / 4))) * (
+                min(1.0, 25.0 / n_frames) if n_frames > 25 else 1.0) * 2.5
             self._segment_stats(g, cams, tr)
 
     def _segment_stats(self, g, cams, tr):
@@ -332,7 +366,7 @@ class ClipModel:
     def log_likelihood(self, theta):
         theta = np.atleast_2d(theta)
         lh = theta[:, 0]
-        ll = self._interp(self.ll_track, lh) + self._interp(self.ll_static, lh)
+        ll = self.track_weight * self._interp(self.ll_track, lh) + self._interp(self.ll_static, lh)
         L = self.lengths(theta)
         for s in OBSERVED_SEGMENTS:
             obs = self._interp(self.seg_obs[s], lh)
@@ -415,7 +449,8 @@ class ClipModel:
                 noisy[..., :2] += (_ar1_noise(rng, self.kp.shape[:2] + (2,), self.noise_sd, self.noise_rho)
                                    * per_joint[None, :, None])
                 kp = clean_keypoints(noisy, self.fps)
-            tr = fit_ground_track(cams, kp, self.fps)
+            # the same contacts for every draw (detected once on the cleaned keypoints)
+            tr = fit_ground_track(cams, kp, self.fps, contacts=self.contacts)
             seg = {k: float(v[s]) for k, v in L.items()}
             res = lift(cams, kp, self.fps, segments_m=seg, track=tr, config=cfg)
             joints[s] = res.joints_track_m

@@ -12,8 +12,8 @@ Sources
   main-stand positions (8-20 m, stands rise about 0.4-0.5 m per row) and
   roof-level cameras (25-30 m), the range of the seed paper's and probreg's
   synthetic set-ups.  Override with the real height when it is known.
-* Stature of athletes: normal, mean 1.75 m, sd 0.09 m, covering elite
-  sprinters and middle-distance runners of both sexes (about 1.60-1.95 m);
+* Stature of athletes: normal, mean 1.76 m, sd 0.10 m, covering elite
+  sprinters and middle-distance runners of both sexes (about 1.56-1.96 m at 2 sd);
   set it to the athlete's measured stature (with a small sd) when known.
 * Segment proportions of stature (thigh 0.245, shank 0.246, upper arm
   0.186, forearm 0.146, trunk 0.288, hip-joint separation 0.10, shoulder
@@ -126,7 +126,7 @@ class ModelPriors:
     """Priors of the clip model: camera height, stature, segment-proportion multipliers."""
 
     camera_height: Prior = field(default_factory=lambda: LogNormalPrior(12.0, 0.5))
-    stature: Prior = field(default_factory=lambda: NormalPrior(1.75, 0.09))
+    stature: Prior = field(default_factory=lambda: NormalPrior(1.76, 0.10))
     proportion_sd: float = 0.04
 
     @classmethod
@@ -148,8 +148,8 @@ class ModelPriors:
                                 height_sd if height_sd is not None else (0.05 if height is not None else 0.5))
         st = base.stature
         if stature is not None or stature_sd is not None:
-            st = NormalPrior(stature if stature is not None else 1.75,
-                             stature_sd if stature_sd is not None else (0.02 if stature is not None else 0.09))
+            st = NormalPrior(stature if stature is not None else 1.76,
+                             stature_sd if stature_sd is not None else (0.02 if stature is not None else 0.10))
         return cls(camera_height=ch, stature=st)
 
     def segment_means(self, stature_m):

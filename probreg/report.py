@@ -141,3 +141,59 @@ def clip_report(clip_dir, out_html):
     axes[1].legend(ncol=2)
     rep.figure(fig, "Ground-truth joint angles (CLIP_FORMAT definitions) and foot contacts")
     return rep.save(out_html)
+
+
+def run_report(out_html, clip, result, joints_median, cameras):
+    """Report of a pipeline run: posterior of the calibration and the athlete, angle bands, gait."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from .kinematics import GAIT_FIELDS
+
+    rep = HtmlReport(f"probreg: {Path(str(clip.path)).name}")
+    d = result.diagnostics
+    h = result.height
+    post = result.posterior.posterior
+    rep.heading("Calibration and athlete (posterior median, 90 % interval)")
+    rows = [["camera height (m)", h["median"], h["lo"], h["hi"]]]
+    for var in ["stature", "thigh_m", "shank_m", "upper_arm_m", "forearm_m", "trunk_m"]:
+        v = post[var].values.ravel()
+        rows.append([var.replace("_m", " (m)"), float(np.median(v)), float(np.percentile(v, 5)),
+                     float(np.percentile(v, 95))])
+    rep.table(["quantity", "median", "5 %", "95 %"], rows, fmt="{:.3f}")
+    rep.paragraph(f"emcee: {d['walkers']} walkers x {d['steps']} steps, acceptance "
+                  f"{d['acceptance_fraction']:.2f}, max integrated autocorrelation time "
+                  f"{max(d['tau'].values()):.0f} steps ({d['steps_per_tau']:.0f} tau), ESS(height) "
+                  f"{d['ess_height']:.0f}, R-hat(height) {d['rhat_height']:.3f}.", cls="note")
+    t = np.arange(clip.n_frames) / clip.fps
+    fig, axes = plt.subplots(3, 1, figsize=(10, 9), sharex=True)
+    for ax, names in zip(axes, (("knee_l", "knee_r"), ("hip_l", "hip_r"), ("elbow_l", "elbow_r"))):
+        for name, col in zip(names, ("tab:blue", "tab:orange")):
+            med, lo, hi = result.angle_summary[name]
+            ax.fill_between(t, lo, hi, color=col, alpha=0.25, lw=0)
+            ax.plot(t, med, color=col, label=f"{name} (median, 90 % band)")
+        ax.set_ylabel("deg")
+        ax.legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time (s)")
+    rep.figure(fig, "Joint angles with 90 % credible bands (calibration, limb lengths and detector noise)")
+    rep.heading("Gait")
+    rep.table(["quantity", "median", "5 %", "95 %", "unit"],
+              [[k, v["median"], v["lo"], v["hi"], GAIT_FIELDS.get(k, "")] for k, v in result.gait.items()])
+    if clip.frame_paths:
+        mid = len(clip.frame_paths) // 2
+        img = cv2.imread(str(clip.frame_paths[mid]))
+        if img is not None and cameras[mid] is not None and np.all(np.isfinite(joints_median[mid])):
+            draw_skeleton(img, cameras[mid].project(joints_median[mid]), (0, 255, 0))
+            if clip.keypoints_px is not None:
+                draw_skeleton(img, clip.keypoints_px[mid], (0, 200, 255), 1)
+            rep.image(img, f"frame {mid}: posterior-median 3D skeleton re-projected (green), keypoints (orange)")
+    rep.heading("Timing")
+    rep.table(["stage", "seconds"], [[k, v] for k, v in result.timings.items()])
+    rep.paragraph("Uncertainty sources in the bands: the camera height (the one calibration degree of "
+                  "freedom), the athlete's limb lengths, and the 2D detector noise (re-simulated from the "
+                  "noise level estimated in this clip). Not included: errors of the lane-line detection "
+                  "beyond the per-frame fit, systematic detector bias, and model errors of the lifting.",
+                  cls="note")
+    return rep.save(out_html)

@@ -171,7 +171,8 @@ def _contact_points(ankles_m, contacts):
     return np.array(pts, float).reshape(-1, 4)
 
 
-def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: TrackConfig = TrackConfig()):
+def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: TrackConfig = TrackConfig(),
+                     contacts=None, length_scale=1.0):
     """Contacts and the Kalman/RTS-smoothed ground track of the athlete.
 
     Parameters
@@ -182,6 +183,12 @@ def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: Tr
     fps : float
     ankle_height_m : float
         Height of the ankle joint centre above the ground in stance.
+    contacts : ndarray of bool (F, 2), optional
+        Fixed contact flags (e.g. detected once for a reference camera), so that
+        the filter sees the same measurements under every camera hypothesis.
+    length_scale : float
+        Scales the filter's noise model (metres) with the hypothesis' scale, so that
+        its log-likelihood compares hypotheses of different size fairly.
 
     Returns
     -------
@@ -192,10 +199,12 @@ def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: Tr
 
     F = len(keypoints_px)
     ankles = cast_ankles(cameras, keypoints_px, ankle_height_m)
-    contacts = detect_contacts(ankles, fps, config)
+    if contacts is None:
+        contacts = detect_contacts(ankles, fps, config)
+    contacts = np.asarray(contacts, bool)
     cps = _contact_points(ankles, contacts)
     status = "ok"
-    R_meas = np.diag(np.square(config.contact_std_m))
+    R_meas = np.diag(np.square(np.asarray(config.contact_std_m) * length_scale))
     # left feet land left of the line of travel, right feet right of it: remove half the
     # step width (estimated from the clip) so that contacts measure the centre line
     half_step = 0.0
@@ -221,8 +230,8 @@ def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: Tr
     kf.F = np.kron(np.eye(2), np.array([[1.0, dt], [0.0, 1.0]]))
     kf.H = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
     kf.Q = np.zeros((4, 4))
-    kf.Q[:2, :2] = Q_discrete_white_noise(2, dt=dt, var=config.accel_std_mps2[0] ** 2)
-    kf.Q[2:, 2:] = Q_discrete_white_noise(2, dt=dt, var=config.accel_std_mps2[1] ** 2)
+    kf.Q[:2, :2] = Q_discrete_white_noise(2, dt=dt, var=(config.accel_std_mps2[0] * length_scale) ** 2)
+    kf.Q[2:, 2:] = Q_discrete_white_noise(2, dt=dt, var=(config.accel_std_mps2[1] * length_scale) ** 2)
     kf.R = R_meas
     keys = sorted(meas)
     if not keys:

@@ -1,0 +1,181 @@
+"""The whole pipeline for one clip: frames -> lanes -> family -> posterior -> angles -> result folder.
+
+Writes the result layout of ``CLIP_FORMAT.md``: ``angles.csv``, ``joints3d.npz``,
+``camera.json``, ``posterior.nc`` and ``report.html`` (plus ``gait.json`` and
+``run.json`` with diagnostics and per-frame statuses).
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass, field
+from pathlib import Path
+
+import numpy as np
+
+from .io.clip import ClipFormatError, atomic_output_dir, load_clip, write_json
+from .io.frames import has_frames
+from .io.results import write_angles_csv, write_joints_npz
+from .kinematics import GAIT_FIELDS
+from .posterior import PARAM_NAMES, SEGMENTS, ClipModel, SamplerSettings
+from .priors import ModelPriors
+from .registration import camera_json, register_clip
+from .skeleton import JOINT_NAMES
+
+__all__ = ["RunOptions", "RunResult", "run_clip", "posterior_inference_data"]
+
+
+@dataclass(frozen=True)
+class RunOptions:
+    """Options of :func:`run_clip` (all settable from the command line)."""
+
+    priors: ModelPriors = field(default_factory=ModelPriors)
+    sampler: SamplerSettings = field(default_factory=SamplerSettings)
+    dist: tuple | None = None
+    min_score: float = 0.3
+    branch: str = "narrow"
+    report: bool = True
+
+
+@dataclass
+class RunResult:
+    out_dir: Path
+    model: ClipModel
+    posterior: object
+    angle_summary: dict
+    height: dict
+    gait: dict
+    diagnostics: dict
+    timings: dict
+
+
+def _arviz():
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", FutureWarning)  # ArviZ announces its 1.0 refactor on import
+        import arviz as az
+    return az
+
+
+def posterior_inference_data(sampler, burn=0, keypoints_px=None, frame_lanes=None, coords=None):
+    """ArviZ InferenceData from the emcee sampler (``az.from_emcee``), with the observed
+    keypoints and vanishing points as ``observed_data`` and derived quantities."""
+    az = _arviz()
+
+    idata = az.from_emcee(sampler, var_names=PARAM_NAMES)
+    if burn:
+        idata = idata.sel(draw=slice(burn, None))
+    post = idata.posterior
+    post["height_m"] = np.exp(post["log_height"])
+    from .priors import SEGMENT_PROPORTIONS
+
+    for s in SEGMENTS:
+        post[f"{s}_m"] = post["stature"] * SEGMENT_PROPORTIONS[s] * post[f"m_{s}"]
+    obs = {}
+    if keypoints_px is not None:
+        obs["keypoints_px"] = np.asarray(keypoints_px, float)
+    if frame_lanes is not None:
+        obs["vanishing_point"] = np.array([fl.vanishing_point if fl.vanishing_point is not None
+                                           else np.full(3, np.nan) for fl in frame_lanes])
+        obs["n_lane_lines"] = np.array([len(fl.lines) for fl in frame_lanes])
+    if obs:
+        od = az.from_dict(observed_data=obs,
+                          dims={"keypoints_px": ["frame", "joint", "coord"],
+                                "vanishing_point": ["frame", "homogeneous"], "n_lane_lines": ["frame"]},
+                          coords={"joint": list(JOINT_NAMES), "coord": ["x", "y", "score"],
+                                  "homogeneous": ["x", "y", "w"]})
+        idata.extend(od)
+    return idata
+
+
+def _diagnostics(sampler, tau, idata):
+    az = _arviz()
+
+    post = idata.posterior[["log_height", "stature"]]
+    ess = az.ess(post)
+    rhat = az.rhat(post)
+    return {
+        "acceptance_fraction": float(np.mean(sampler.acceptance_fraction)),
+        "tau": {n: float(t) for n, t in zip(PARAM_NAMES, tau)},
+        "steps": int(sampler.iteration),
+        "walkers": int(sampler.nwalkers),
+        "steps_per_tau": float(sampler.iteration / np.max(tau)) if np.all(np.isfinite(tau)) else float("nan"),
+        "ess_height": float(ess["log_height"]),
+        "ess_stature": float(ess["stature"]),
+        "rhat_height": float(rhat["log_height"]),
+        "rhat_stature": float(rhat["stature"]),
+    }
+
+
+def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
+    """Run the full pipeline on a clip folder and write the result folder.
+
+    Raises
+    ------
+    ClipFormatError
+        For a missing or malformed clip, a clip without frames or without keypoints.
+    ValueError
+        When no frame shows lanes of the straight.
+    """
+    t0 = time.perf_counter()
+    clip = load_clip(clip_dir, min_score=options.min_score)
+    if clip.keypoints_px is None:
+        raise ClipFormatError(f"{clip_dir}: no keypoints2d.json (run 'probreg detect' first)")
+    if not has_frames(clip):
+        raise ClipFormatError(f"{clip_dir}: no frames/ folder or video.mp4")
+    reg = register_clip(clip)
+    t1 = time.perf_counter()
+    log(f"lanes: {reg.status_counts()} ({t1 - t0:.1f} s)")
+    model = ClipModel(reg, clip.keypoints_px, clip.fps, clip.athlete_lane, priors=options.priors,
+                      dist=options.dist, branch=options.branch)
+    sampler, tau = model.sample(options.sampler)
+    chain = sampler.get_chain()  # (steps, walkers, D)
+    flat = chain.reshape(-1, chain.shape[-1])
+    rng = np.random.default_rng(options.sampler.seed)
+    draws = flat[rng.choice(len(flat), min(options.sampler.n_draws, len(flat)), replace=False)]
+    joints, angles, gait = model.propagate(draws, rng, bootstrap_noise=options.sampler.bootstrap_noise)
+    idata = posterior_inference_data(sampler, keypoints_px=clip.keypoints_px, frame_lanes=reg.frame_lanes)
+    diag = _diagnostics(sampler, tau, idata)
+    h = np.exp(flat[:, 0])
+    height = {"median": float(np.median(h)), "lo": float(np.percentile(h, 5)), "hi": float(np.percentile(h, 95))}
+    import warnings
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        summ = {k: (np.nanmedian(v, 0), np.nanpercentile(v, 5, 0), np.nanpercentile(v, 95, 0))
+                for k, v in angles.items()}
+        gait_s = {k: {"median": float(np.nanmedian(v)), "lo": float(np.nanpercentile(v, 5)),
+                      "hi": float(np.nanpercentile(v, 95)), "unit": GAIT_FIELDS[k]} for k, v in gait.items()}
+        joints_med = np.nanmedian(joints, 0)
+    cams_med = model.cameras_at(height["median"])
+    from .posterior import _as_list
+
+    cam_list = _as_list(cams_med)
+    timings = {"total_s": time.perf_counter() - t0, "lanes_s": t1 - t0, **model.timings}
+    out_dir = Path(out_dir)
+    with atomic_output_dir(out_dir, overwrite=True) as tmp:
+        write_angles_csv(tmp / "angles.csv", clip.fps, {k: v[0] for k, v in summ.items()},
+                         {k: v[1] for k, v in summ.items()}, {k: v[2] for k, v in summ.items()})
+        write_joints_npz(tmp / "joints3d.npz", joints_med, samples=joints)
+        cj = camera_json(cam_list, height["median"], clip.n_frames, height["lo"], height["hi"])
+        write_json(tmp / "camera.json", cj)
+        idata.to_netcdf(str(tmp / "posterior.nc"))
+        write_json(tmp / "gait.json", gait_s)
+        status = ["ok" if c is not None else reg.frame_lanes[i].status for i, c in enumerate(cam_list)]
+        write_json(tmp / "run.json", {"diagnostics": diag, "timings_s": timings, "height_m": height,
+                                     "frame_status": status, "noise_px": model.noise_sd,
+                                     "noise_rho": model.noise_rho, "n_draws": len(draws),
+                                     "priors": {"camera_height": repr(options.priors.camera_height),
+                                                "stature": repr(options.priors.stature)}})
+        result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
+                           gait=gait_s, diagnostics=diag, timings=timings)
+        if options.report:
+            from .report import run_report
+
+            run_report(tmp / "report.html", clip, result, joints_med, cam_list)
+    log(f"height {height['median']:.2f} m [{height['lo']:.2f}, {height['hi']:.2f}]; "
+        f"{diag['steps']} steps (tau max {max(diag['tau'].values()):.0f}); total {timings['total_s']:.1f} s")
+    return result
+
+
