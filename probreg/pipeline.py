@@ -162,7 +162,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
         write_json(tmp / "camera.json", cj)
         idata.to_netcdf(str(tmp / "posterior.nc"))
         write_json(tmp / "gait.json", gait_s)
-        status = ["ok" if c is not None else reg.frame_lanes[i].status for i, c in enumerate(cam_list)]
+        status = [("ok" if reg.frame_lanes[i].ok else "bridged") if c is not None else reg.frame_lanes[i].status
+                  for i, c in enumerate(cam_list)]
         write_json(tmp / "run.json", {"diagnostics": diag, "timings_s": timings, "height_m": height,
                                      "frame_status": status, "noise_px": model.noise_sd,
                                      "noise_rho": model.noise_rho, "n_draws": len(draws),

@@ -171,6 +171,7 @@ class ClipModel:
         self.F = len(self.kp)
         self.branch = branch
         self.track_weight = float(track_weight)
+        self.max_gap_frames = 25
         self._build_branches()
         if not self.valid.any():
             raise ValueError("no frame has a usable calibration family (no lanes found)")
@@ -263,7 +264,26 @@ class ClipModel:
             u, _, vt = np.linalg.svd(Rm)
             R[i] = u @ vt  # nearest rotation
         off = self.offsets if offsets is None else offsets
-        C = np.column_stack([np.zeros(F), y - self.reg.lane_width_m * off, np.full(F, height_m)])
+        y = y - self.reg.lane_width_m * off
+        # frames without lanes between frames with lanes: the camera moves smoothly, so
+        # bridge them (zoom, lateral position and rotation interpolated in time)
+        self.gap_distance = np.zeros(F)
+        ok = np.flatnonzero(valid)
+        if len(ok) >= 2:
+            for i in range(ok[0] + 1, ok[-1]):
+                if valid[i]:
+                    continue
+                a, b = ok[ok < i][-1], ok[ok > i][0]
+                if b - a > self.max_gap_frames:
+                    continue
+                t = (i - a) / (b - a)
+                f[i] = np.exp((1 - t) * np.log(f[a]) + t * np.log(f[b]))
+                y[i] = (1 - t) * y[a] + t * y[b]
+                u, _, vt = np.linalg.svd((1 - t) * R[a] + t * R[b])
+                R[i] = u @ vt
+                valid[i] = True
+                self.gap_distance[i] = min(i - a, b - i)
+        C = np.column_stack([np.zeros(F), y, np.full(F, height_m)])
         C[~valid] = np.nan
         return CameraArrays(valid=valid, C=C, R=R, focal_px=f, principal_px=self.pp,
                             dist=np.zeros(5) if self.dist is None else self.dist)
@@ -366,7 +386,8 @@ class ClipModel:
     def log_likelihood(self, theta):
         theta = np.atleast_2d(theta)
         lh = theta[:, 0]
-        ll = self.track_weight * self._interp(self.ll_track, lh) + self._interp(self.ll_static, lh)
+        with np.errstate(invalid="ignore"):
+            ll = self.track_weight * self._interp(self.ll_track, lh) + self._interp(self.ll_static, lh)
         L = self.lengths(theta)
         for s in OBSERVED_SEGMENTS:
             obs = self._interp(self.seg_obs[s], lh)
@@ -409,6 +430,9 @@ class ClipModel:
 
         rng = np.random.default_rng(settings.seed)
         D = len(PARAM_NAMES)
+        if settings.n_walkers < 2 * D:
+            raise ValueError(f"emcee's stretch move needs at least {2 * D} walkers for {D} parameters, "
+                             f"got {settings.n_walkers}")
         p0 = self.initial_walkers(settings.n_walkers, rng)
         sampler = emcee.EnsembleSampler(settings.n_walkers, D, self.log_prob, vectorize=True)
         sampler.random_state = np.random.RandomState(settings.seed).get_state()  # reproducible moves
@@ -440,7 +464,7 @@ class ClipModel:
         per_joint = self._joint_noise_scale()
         for s in range(S):
             h = float(np.exp(draws[s, 0]))
-            cams = self.cameras_at(h)
+            cams = self._jitter_bridged(self.cameras_at(h), rng)
             kp = self.kp
             if bootstrap_noise and np.isfinite(self.noise_sd) and self.noise_sd > 0:
                 # parametric bootstrap: the smoothed keypoints plus re-simulated detector noise,
@@ -461,6 +485,24 @@ class ClipModel:
                 gait.setdefault(k, np.full(S, np.nan))[s] = v
         self.timings["propagation_s"] = time.perf_counter() - t0
         return joints, angles, gait
+
+    def _jitter_bridged(self, cams, rng, deg_per_frame=0.01, zoom_per_frame=0.002):
+        """Uncertainty of bridged frames (no lanes): random pan/tilt and zoom growing with the
+        distance to the nearest frame with lanes, so their bands widen where evidence is missing."""
+        d = self.gap_distance
+        if not np.any(d > 0):
+            return cams
+        R = cams.R.copy()
+        f = cams.focal_px.copy()
+        for i in np.flatnonzero(d > 0):
+            a = np.radians(deg_per_frame * d[i]) * rng.standard_normal(2)
+            ca, sa, cb, sb = np.cos(a[0]), np.sin(a[0]), np.cos(a[1]), np.sin(a[1])
+            pan = np.array([[ca, 0, -sa], [0, 1, 0], [sa, 0, ca]])
+            tilt = np.array([[1, 0, 0], [0, cb, -sb], [0, sb, cb]])
+            R[i] = tilt @ pan @ R[i]
+            f[i] *= np.exp(zoom_per_frame * d[i] * rng.standard_normal())
+        return CameraArrays(valid=cams.valid, C=cams.C, R=R, focal_px=f, principal_px=cams.principal_px,
+                            dist=cams.dist)
 
     def _joint_noise_scale(self):
         """Relative noise of each joint (trunk = 1) from the high-frequency residuals."""

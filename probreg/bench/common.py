@@ -21,6 +21,7 @@ BENCHMARKS = {
     "synth-speed": "probreg.bench.synth_speed:run",
     "registration": "probreg.bench.registration:run",
     "lifting": "probreg.bench.lifting:run",
+    "posterior": "probreg.bench.posterior:run",
 }
 
 

@@ -1,0 +1,145 @@
+"""End-to-end posterior on the benchmark suite: accuracy, calibration of the bands, speed.
+
+Every clip is run exactly as ``probreg run`` runs it (frames -> lanes -> family
+-> posterior -> propagated angles; the detector-like keypoints of the clip are
+given), once with the default priors and once with the athlete's stature
+known (prior sd 2 cm), as a sports scientist who measured the athlete would.
+
+* accuracy of the posterior median: knee-angle error (deg, both knees, every
+  frame), pelvis-aligned MPJPE (cm), camera height (%), camera location (% of
+  the camera-athlete distance; along-track position not scored), FOV (deg);
+* calibration: the fraction of frames whose true knee angle lies inside the
+  90 % band (target 85-95 %), and of clips whose 90 % camera-height interval
+  contains the true height (target ~9 in 10);
+* time of the whole run per 250-frame clip (2 cores).
+"""
+
+from __future__ import annotations
+
+import tempfile
+import time
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+
+from ..io.clip import load_groundtruth, read_cameras_json
+from ..io.results import read_angles_csv
+from ..pipeline import RunOptions, run_clip
+from ..priors import ModelPriors
+from ..skeleton import JOINT_INDEX, joint_angles
+from ..synth import SUITES
+from .common import BenchReport, md_table
+from .registration import suite_dir
+
+__all__ = ["run", "score_result"]
+
+
+def score_result(clip_dir, out_dir):
+    """Errors and coverage of one result folder against the clip's ground truth."""
+    gt = load_groundtruth(clip_dir)
+    ang = read_angles_csv(Path(out_dir) / "angles.csv")
+    truth = joint_angles(gt.joints3d_track_m)
+    knee_err, inside = [], []
+    for k in ("knee_l", "knee_r"):
+        frames, med, lo, hi = ang[k]
+        t = truth[k][frames.astype(int)]
+        ok = np.isfinite(med)
+        knee_err.append(np.abs(med[ok] - t[ok]))
+        inside.append((t[ok] >= lo[ok]) & (t[ok] <= hi[ok]))
+    knee_err, inside = np.concatenate(knee_err), np.concatenate(inside)
+    j = np.load(Path(out_dir) / "joints3d.npz")["median"]
+    rel = j - j[:, JOINT_INDEX["pelvis"]][:, None]
+    trel = gt.joints3d_track_m - gt.joints3d_track_m[:, JOINT_INDEX["pelvis"]][:, None]
+    mpjpe = float(np.nanmean(np.linalg.norm(rel - trel, axis=-1)) * 100)
+    import json
+
+    cam_doc = json.loads((Path(out_dir) / "camera.json").read_text())
+    h = cam_doc["height_m"]
+    h_true = float(gt.cameras[0].C[2])
+    cams = read_cameras_json(Path(out_dir) / "camera.json")
+    loc, fov = [], []
+    pel = gt.joints3d_track_m[:, JOINT_INDEX["pelvis"], :2]
+    for i, c in cams.items():
+        if c is None:
+            continue
+        g = gt.cameras[i]
+        loc.append(100 * np.linalg.norm((c.C - g.C)[1:]) / np.linalg.norm(g.C[:2] - pel[i]))
+        fov.append(abs(c.fov_deg - g.fov_deg))
+    return {
+        "knee_deg": float(np.mean(knee_err)), "mpjpe_cm": mpjpe,
+        "height_pct": 100 * abs(h["median"] - h_true) / h_true,
+        "height_in_interval": bool(h["lo"] <= h_true <= h["hi"]),
+        "loc_pct": float(np.mean(loc)) if loc else float("nan"),
+        "fov_deg": float(np.mean(fov)) if fov else float("nan"),
+        "knee_coverage": float(np.mean(inside)), "n_frames": int(len(inside) // 2),
+        "h_true": h_true, "h_med": h["median"], "h_lo": h["lo"], "h_hi": h["hi"],
+    }
+
+
+def run(args=None):
+    rep = BenchReport("posterior", "Bayesian model end to end: accuracy, calibrated uncertainty, speed")
+    rep.add(__doc__.split("\n\n", 1)[1])
+    root, tmp = suite_dir(args)
+    try:
+        results = {}
+        for variant in ("default priors", "stature known"):
+            rows = []
+            for name, preset, _ in SUITES["bench"]:
+                clip = root / name
+                opts = RunOptions(report=False)
+                if variant == "stature known":
+                    st = load_groundtruth(clip).athlete["stature_m"]
+                    opts = replace(opts, priors=ModelPriors.from_options(stature=st, stature_sd=0.02))
+                gt_dist = load_groundtruth(clip).cameras[0].dist
+                if np.any(gt_dist):
+                    opts = replace(opts, dist=tuple(gt_dist))
+                with tempfile.TemporaryDirectory() as out:
+                    t0 = time.perf_counter()
+                    run_clip(clip, Path(out) / "r", opts, log=lambda *a: None)
+                    dt = time.perf_counter() - t0
+                    s = score_result(clip, Path(out) / "r")
+                s["time_s"] = dt
+                rows.append((name, preset, s))
+            results[variant] = rows
+            table = [[n, p, s["knee_deg"], s["knee_coverage"] * 100, s["mpjpe_cm"], s["height_pct"],
+                      f"{s['h_med']:.2f} [{s['h_lo']:.2f}, {s['h_hi']:.2f}] ({s['h_true']:.2f})",
+                      s["loc_pct"], s["fov_deg"], s["time_s"]] for n, p, s in rows]
+            rep.add(f"## {variant}: per clip\n")
+            rep.add(md_table(["clip", "preset", "knee err deg", "knee in 90 % band %", "MPJPE cm",
+                              "height err %", "height median [90 %] (true) m", "location err %",
+                              "FOV err deg", "time s"], table))
+            S = [s for _, _, s in rows]
+            summ = {
+                "knee_deg": np.mean([s["knee_deg"] for s in S]),
+                "knee_coverage": np.mean([s["knee_coverage"] for s in S]),
+                "mpjpe_cm": np.mean([s["mpjpe_cm"] for s in S]),
+                "height_pct": np.mean([s["height_pct"] for s in S]),
+                "height_covered": int(sum(s["height_in_interval"] for s in S)),
+                "loc_pct": np.nanmean([s["loc_pct"] for s in S]),
+                "fov_deg": np.nanmean([s["fov_deg"] for s in S]),
+                "time_s": np.median([s["time_s"] for s in S]),
+            }
+            rep.numbers[variant] = summ
+            n = len(S)
+            checks = [
+                ("knee-angle error of the posterior median", "<= 3 deg", f"{summ['knee_deg']:.2f} deg",
+                 summ["knee_deg"] <= 3),
+                ("pelvis-aligned 3D error", "<= 4 cm", f"{summ['mpjpe_cm']:.2f} cm", summ["mpjpe_cm"] <= 4),
+                ("camera height", "within 5 %", f"{summ['height_pct']:.1f} %", summ["height_pct"] <= 5),
+                ("camera location", "within 2 % of distance", f"{summ['loc_pct']:.2f} %", summ["loc_pct"] <= 2),
+                ("FOV", "within 0.5 deg", f"{summ['fov_deg']:.3f} deg", summ["fov_deg"] <= 0.5),
+                ("knee frames inside the 90 % band", "85-95 %", f"{100 * summ['knee_coverage']:.1f} %",
+                 0.85 <= summ["knee_coverage"] <= 0.95),
+                ("clips whose 90 % height interval holds the truth", "~9 in 10",
+                 f"{summ['height_covered']} of {n}", summ["height_covered"] >= 0.8 * n),
+                ("full posterior for a 250-frame 1080p clip", "<= 30 s", f"{summ['time_s']:.1f} s (median)",
+                 summ["time_s"] <= 30),
+            ]
+            rep.add(f"### {variant}: targets\n")
+            rep.add(md_table(["quantity", "target", "measured", "met"],
+                             [[a, b, c, "yes" if d else "**no**"] for a, b, c, d in checks]))
+    finally:
+        if tmp is not None:
+            tmp.cleanup()
+    return rep

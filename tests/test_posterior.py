@@ -1,0 +1,140 @@
+"""Known-answer tests of the Bayesian model and the `probreg run` pipeline (short chains)."""
+
+import json
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+
+from probreg.cli import main
+from probreg.io import load_clip, load_groundtruth, read_angles_csv
+from probreg.pipeline import RunOptions, run_clip
+from probreg.posterior import PARAM_NAMES, ClipModel, SamplerSettings, noise_model
+from probreg.priors import LogNormalPrior, ModelPriors, NormalPrior
+from probreg.registration import register_clip
+
+FAST = SamplerSettings(n_walkers=20, burn_in=100, chunk=150, max_steps=600, n_draws=12, seed=1)
+
+
+@pytest.fixture(scope="module")
+def model(small_clip):
+    clip = load_clip(small_clip)
+    gt = load_groundtruth(small_clip)
+    reg = register_clip(clip)
+    priors = ModelPriors.from_options(stature=gt.athlete["stature_m"], stature_sd=0.02)
+    return ClipModel(reg, clip.keypoints_px, clip.fps, clip.athlete_lane, priors=priors,
+                     dist=gt.cameras[0].dist), gt
+
+
+def test_posterior_covers_the_known_height_and_lengths(model):
+    m, gt = model
+    sampler, tau = m.sample(FAST)
+    chain = sampler.get_chain(flat=True)
+    h = np.exp(chain[:, 0])
+    h_true = gt.cameras[0].C[2]
+    lo, hi = np.percentile(h, [2.5, 97.5])
+    assert lo <= h_true <= hi or abs(np.median(h) - h_true) / h_true < 0.05
+    L = m.lengths(chain)
+    for seg in ("thigh", "shank"):
+        assert abs(np.median(L[seg]) - gt.athlete["segments_m"][seg]) < 0.06
+    acc = np.mean(sampler.acceptance_fraction)
+    assert 0.15 < acc < 0.8
+    assert np.all(np.isfinite(tau)) and tau.shape == (len(PARAM_NAMES),)
+
+
+def test_prior_only_run_recovers_the_prior(model, monkeypatch):
+    m, _ = model
+    monkeypatch.setattr(m, "log_likelihood", lambda theta: np.zeros(len(np.atleast_2d(theta))))
+    m.priors = ModelPriors()  # default stature prior N(1.76, 0.10)
+    sampler, _ = m.sample(SamplerSettings(n_walkers=24, burn_in=300, max_steps=1500, seed=2))
+    chain = sampler.get_chain(flat=True)
+    st = chain[:, 1]
+    assert abs(st.mean() - 1.76) < 0.03 and 0.07 < st.std() < 0.13
+    logh = chain[:, 0]
+    assert abs(np.exp(np.median(logh)) - 12.0) < 1.2 and 0.42 < logh.std() < 0.58
+
+
+def test_log_prob_is_vectorised_and_rejects_impossible_values(model):
+    m, gt = model
+    theta = np.tile(np.r_[np.log(gt.cameras[0].C[2]), 1.75, np.ones(7)], (5, 1))
+    theta[1, 1] = -1.0      # negative stature
+    theta[2, 0] = np.log(1e4)  # height outside the grid
+    lp = m.log_prob(theta)
+    assert lp.shape == (5,) and np.isfinite(lp[0]) and lp[1] == -np.inf and lp[2] == -np.inf
+    assert np.isclose(lp[0], lp[3])
+
+
+def test_noise_model_known_answer(rng):
+    n = 4000
+    e = np.zeros((n, 17, 2))
+    w = rng.standard_normal((n, 17, 2))
+    e[0] = w[0]
+    for t in range(1, n):
+        e[t] = 0.5 * e[t - 1] + np.sqrt(1 - 0.25) * w[t]
+    kp = np.concatenate([3.0 * e, np.ones((n, 17, 1))], -1)
+    sd, rho = noise_model(kp)
+    assert abs(sd - 3.0) < 0.3 and abs(rho - 0.5) < 0.1
+
+
+def test_priors_validate_and_report_intervals():
+    with pytest.raises(ValueError, match="sd"):
+        NormalPrior(1.7, 0.0)
+    with pytest.raises(ValueError, match="median"):
+        LogNormalPrior(-1.0, 0.5)
+    p = ModelPriors.from_options(height=20.0)
+    assert np.isclose(p.camera_height.centre(), 20.0)
+
+
+def test_run_pipeline_writes_the_result_layout(small_clip, tmp_path):
+    out = tmp_path / "res"
+    gt = load_groundtruth(small_clip)
+    res = run_clip(small_clip, out, RunOptions(sampler=FAST, dist=tuple(gt.cameras[0].dist)), log=lambda *a: None)
+    for name in ("angles.csv", "joints3d.npz", "camera.json", "posterior.nc", "report.html", "gait.json"):
+        assert (out / name).exists(), name
+    ang = read_angles_csv(out / "angles.csv")
+    frames, med, lo, hi = ang["knee_r"]
+    ok = np.isfinite(med)
+    assert ok.mean() > 0.9 and np.all(lo[ok] <= med[ok] + 1e-9) and np.all(med[ok] <= hi[ok] + 1e-9)
+    assert np.mean(hi[ok] - lo[ok]) > 0.5  # a band, not a line
+    npz = np.load(out / "joints3d.npz")
+    assert npz["samples"].shape[0] == FAST.n_draws and npz["median"].shape == (40, 17, 3)
+    cam = json.loads((out / "camera.json").read_text())
+    assert cam["height_m"]["lo"] <= cam["height_m"]["median"] <= cam["height_m"]["hi"]
+    import arviz as az
+
+    idata = az.from_netcdf(str(out / "posterior.nc"))
+    assert {"chain", "draw"} <= set(idata.posterior.dims) and "height_m" in idata.posterior
+    assert "keypoints_px" in idata.observed_data and "sample_stats" in idata.groups()
+    assert res.diagnostics["steps"] >= 150
+
+
+def test_missing_lanes_still_give_a_posterior_with_wider_bands(small_clip, tmp_path):
+    clip_dir = tmp_path / "clip"
+    shutil.copytree(small_clip, clip_dir)
+    blank = np.full((1080, 1920, 3), 90, np.uint8)
+    for i in range(18, 25):
+        cv2.imwrite(str(clip_dir / "frames" / f"{i:06d}.jpg"), blank)
+    out = tmp_path / "res"
+    gt = load_groundtruth(small_clip)
+    run_clip(clip_dir, out, RunOptions(sampler=FAST, dist=tuple(gt.cameras[0].dist), report=False),
+             log=lambda *a: None)
+    status = json.loads((out / "run.json").read_text())["frame_status"]
+    assert status[21] == "bridged" and status[5] == "ok"
+    ang = read_angles_csv(out / "angles.csv")
+    widths = []
+    for k in ("knee_l", "knee_r", "hip_l", "hip_r"):
+        _, med, lo, hi = ang[k]
+        widths.append(hi - lo)
+    w = np.nanmean(widths, axis=0)
+    assert np.nanmean(w[20:23]) > np.nanmedian(w[np.r_[0:15, 28:40]])
+
+
+def test_run_command_bad_input(tmp_path, capsys):
+    assert main(["run", str(tmp_path / "nope"), "--out", str(tmp_path / "o")]) == 2
+    assert "not found" in capsys.readouterr().err
+    clip = tmp_path / "c"
+    clip.mkdir()
+    (clip / "clip.json").write_text('{"fps": 50, "image_size": [1920, 1080], "n_frames": 2}')
+    assert main(["run", str(clip), "--out", str(tmp_path / "o")]) == 2
+    assert "keypoints2d.json" in capsys.readouterr().err
