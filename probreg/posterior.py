@@ -421,7 +421,14 @@ class ClipModel:
         if np.isfinite(obs):
             base[1] = obs
         step = np.log(self.grid[1] / self.grid[0]) if len(self.grid) > 1 else 0.05
-        p0 = base + rng.normal(0, 1, (n, len(base))) * np.r_[step, 0.02, np.full(len(SEGMENTS), 0.02)]
+        scale = np.r_[step, 0.02, np.full(len(SEGMENTS), 0.02)]
+        p0 = base + rng.normal(0, 1, (n, len(base))) * scale
+        # every walker must start where the posterior is positive
+        for _ in range(50):
+            bad = ~np.isfinite(self.log_prob(p0))
+            if not bad.any():
+                break
+            p0[bad] = base + rng.normal(0, 1, (bad.sum(), len(base))) * scale * 0.5
         return p0
 
     def sample(self, settings: SamplerSettings = SamplerSettings(), progress=None):
@@ -437,12 +444,12 @@ class ClipModel:
         sampler = emcee.EnsembleSampler(settings.n_walkers, D, self.log_prob, vectorize=True)
         sampler.random_state = np.random.RandomState(settings.seed).get_state()  # reproducible moves
         t0 = time.perf_counter()
-        state = sampler.run_mcmc(p0, settings.burn_in, progress=False)
+        state = sampler.run_mcmc(p0, settings.burn_in, progress=False, skip_initial_state_check=True)
         sampler.reset()
         tau = np.full(D, np.inf)
         steps = 0
         while steps < settings.max_steps:
-            state = sampler.run_mcmc(state, settings.chunk, progress=False)
+            state = sampler.run_mcmc(state, settings.chunk, progress=False, skip_initial_state_check=True)
             steps += settings.chunk
             tau = sampler.get_autocorr_time(tol=0)
             if np.all(np.isfinite(tau)) and steps >= settings.tau_multiple * np.max(tau):
