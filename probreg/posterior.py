@@ -323,7 +323,7 @@ class ClipModel:
                 self.tracks.append(None)
                 continue
             tr = fit_ground_track(cams, self.kp, self.fps, contacts=self.contacts,
-                                  length_scale=h / self.h_ref)
+                                  config=self._track_config(cams))
             self.tracks.append(tr)
             # tempered to one contact's worth: the filter's innovations are not independent
             # (the same feet, seen through one camera path), and its value under wrong
@@ -340,6 +340,29 @@ class ClipModel:
             self.ll_static[g] = float(np.sum(-2.5 * np.log1p((resid / 0.003) ** 2 / 4))) * (
                 min(1.0, 25.0 / n_frames) if n_frames > 25 else 1.0) * 2.5
             self._segment_stats(g, cams, tr)
+
+    def _track_config(self, cams):
+        """Contact-point noise for this hypothesis: foot placement plus the keypoint noise cast
+        onto the ground (across the track it is magnified by the camera's grazing view)."""
+        from .trajectory import TrackConfig
+
+        ok = cams.valid
+        if not ok.any() or not np.isfinite(self.noise_sd):
+            return TrackConfig()
+        pel = self.kp[:, JOINT_INDEX["pelvis"], :2]
+        from .lifting import pixel_rays
+
+        rays = pixel_rays(cams, pel[:, None, :])[:, 0]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            t = -cams.C[:, 2] / rays[:, 2]
+            depth = np.nanmedian(t)
+            sin_tilt = np.nanmedian(np.abs(rays[:, 2]))
+            f = np.nanmedian(cams.focal_px)
+        along = self.noise_sd * depth / f
+        across = along / max(sin_tilt, 0.02)
+        base = TrackConfig()
+        return TrackConfig(contact_std_m=(float(np.hypot(base.contact_std_m[0], along)),
+                                          float(np.hypot(base.contact_std_m[1], across))))
 
     def _segment_stats(self, g, cams, tr):
         from .lifting import _plane_hits, pixel_rays
@@ -390,10 +413,12 @@ class ClipModel:
             ll = self.track_weight * self._interp(self.ll_track, lh) + self._interp(self.ll_static, lh)
         L = self.lengths(theta)
         for s in OBSERVED_SEGMENTS:
+            if not np.isfinite(self.seg_obs[s]).any():
+                continue  # never seen in this clip: the prior alone speaks
             obs = self._interp(self.seg_obs[s], lh)
             se = self._interp(self.seg_se[s], lh)
-            term = -0.5 * ((obs - L[s]) / se) ** 2 - np.log(se)
-            ll = ll + np.where(np.isfinite(term), term, 0.0)
+            # a height at which a seen segment cannot be measured is not a free pass
+            ll = ll - 0.5 * ((obs - L[s]) / se) ** 2 - np.log(se)
         return np.where(np.isfinite(ll), ll, -np.inf)
 
     def log_prob(self, theta):
