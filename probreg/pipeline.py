@@ -17,7 +17,7 @@ from .io.clip import ClipFormatError, atomic_output_dir, load_clip, write_json
 from .io.frames import has_frames
 from .io.results import write_angles_csv, write_joints_npz
 from .kinematics import GAIT_FIELDS
-from .posterior import PARAM_NAMES, SEGMENTS, ClipModel, SamplerSettings
+from .posterior import PARAM_NAMES, SEGMENTS, ClipModel, SamplerSettings, angle_bands
 from .priors import ModelPriors
 from .registration import camera_json, register_clip
 from .skeleton import JOINT_NAMES
@@ -35,6 +35,7 @@ class RunOptions:
     min_score: float = 0.3
     branch: str = "narrow"
     report: bool = True
+    band_inflation: float | None = None  # None: probreg.posterior.BAND_INFLATION
 
 
 @dataclass
@@ -134,7 +135,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
     flat = chain.reshape(-1, chain.shape[-1])
     rng = np.random.default_rng(options.sampler.seed)
     draws = flat[rng.choice(len(flat), min(options.sampler.n_draws, len(flat)), replace=False)]
-    joints, angles, gait = model.propagate(draws, rng, bootstrap_noise=options.sampler.bootstrap_noise)
+    prop = model.propagate(draws, rng, bootstrap_noise=options.sampler.bootstrap_noise)
+    joints, gait = prop["joints"], prop["gait"]
     idata = posterior_inference_data(sampler, keypoints_px=clip.keypoints_px, frame_lanes=reg.frame_lanes)
     diag = _diagnostics(sampler, tau, idata)
     h = np.exp(flat[:, 0])
@@ -143,11 +145,10 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        summ = {k: (np.nanmedian(v, 0), np.nanpercentile(v, 5, 0), np.nanpercentile(v, 95, 0))
-                for k, v in angles.items()}
+        summ = angle_bands(prop["angles_point"], prop["angles"], inflation=options.band_inflation)
         gait_s = {k: {"median": float(np.nanmedian(v)), "lo": float(np.nanpercentile(v, 5)),
                       "hi": float(np.nanpercentile(v, 95)), "unit": GAIT_FIELDS[k]} for k, v in gait.items()}
-        joints_med = np.nanmedian(joints, 0)
+        joints_med = np.nanmedian(prop["joints_point"], 0)
     cams_med = model.cameras_at(height["median"])
     from .posterior import _as_list
 

@@ -49,7 +49,41 @@ from .registration import ClipRegistration, athlete_ground_track
 from .skeleton import ANGLE_NAMES, JOINT_INDEX
 from .trajectory import fit_ground_track
 
-__all__ = ["ClipModel", "SamplerSettings", "PosteriorResult", "noise_model", "PARAM_NAMES"]
+__all__ = ["ClipModel", "SamplerSettings", "PosteriorResult", "noise_model", "PARAM_NAMES", "angle_bands",
+           "BAND_INFLATION"]
+
+#: Scale of the bootstrap deviations in the reported bands, calibrated on held-out synthetic
+#: clips (seeds outside the benchmark suite; ``probreg bench band-calibration``): the bootstrap
+#: misses the smoothing bias of the estimator (peaks flattened by the low-pass), so its spread
+#: alone under-covers.
+BAND_INFLATION = 1.13
+
+
+def angle_bands(angles_point, angles_noisy, lo=5.0, hi=95.0, inflation=None):
+    """Per-frame median and band of every angle.
+
+    The median is that of the point liftings (no re-simulated noise, which would add its
+    own bias); the band adds the bootstrap's spread about its own median, scaled by
+    ``inflation`` (default :data:`BAND_INFLATION`).
+
+    Returns
+    -------
+    dict name -> (median, lo, hi), each (F,)
+    """
+    import warnings
+
+    k = BAND_INFLATION if inflation is None else inflation
+    out = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        for name, pts in angles_point.items():
+            med = np.nanmedian(pts, 0)
+            noisy = angles_noisy[name]
+            centre = np.nanmedian(noisy, 0)
+            dev_lo = np.nanpercentile(noisy, lo, 0) - centre
+            dev_hi = np.nanpercentile(noisy, hi, 0) - centre
+            out[name] = (med, med + k * dev_lo, med + k * dev_hi)
+    return out
 
 SEGMENTS = ("thigh", "shank", "upper_arm", "forearm", "trunk", "hip_width", "shoulder_width")
 OBSERVED_SEGMENTS = ("thigh", "shank", "upper_arm", "forearm", "trunk")
@@ -485,38 +519,58 @@ class ClipModel:
 
     # ------------------------------------------------------------------ propagation
     def propagate(self, draws, rng, bootstrap_noise=True, config: LiftConfig = LiftConfig()):
-        """Lift the clip for every draw: joints (S, F, 17, 3), angles {name: (S, F)}, gait {name: (S,)}."""
+        """Lift the clip for every draw.
+
+        Each draw is lifted twice: from the cleaned keypoints (the draw's *point*
+        lifting: calibration and limb-length uncertainty) and from the cleaned
+        keypoints plus re-simulated detector noise, cleaned again exactly as the
+        data were (parametric bootstrap: adds the detector noise).
+
+        Returns
+        -------
+        dict
+            ``joints`` (S, F, 17, 3) and ``angles`` {name: (S, F)} with noise;
+            ``joints_point``, ``angles_point`` without; ``gait`` {name: (S,)} from the
+            point liftings.
+        """
         t0 = time.perf_counter()
         S = len(draws)
-        joints = np.full((S, self.F, 17, 3), np.nan, np.float32)
-        angles = {k: np.full((S, self.F), np.nan) for k in ANGLE_NAMES}
-        gait = {}
+        out = {"joints": np.full((S, self.F, 17, 3), np.nan, np.float32),
+               "joints_point": np.full((S, self.F, 17, 3), np.nan, np.float32),
+               "angles": {k: np.full((S, self.F), np.nan) for k in ANGLE_NAMES},
+               "angles_point": {k: np.full((S, self.F), np.nan) for k in ANGLE_NAMES},
+               "gait": {}}
         cfg = LiftConfig(**{**config.__dict__, "smooth_cutoff_hz": None})
         L = self.lengths(draws)
         per_joint = self._joint_noise_scale()
+        with_noise = bootstrap_noise and np.isfinite(self.noise_sd) and self.noise_sd > 0
         for s in range(S):
             h = float(np.exp(draws[s, 0]))
             cams = self._jitter_bridged(self.cameras_at(h), rng)
-            kp = self.kp
-            if bootstrap_noise and np.isfinite(self.noise_sd) and self.noise_sd > 0:
-                # parametric bootstrap: the smoothed keypoints plus re-simulated detector noise,
-                # cleaned again exactly as the data were
+            seg = {k: float(v[s]) for k, v in L.items()}
+            variants = [("_point", self.kp)]
+            if with_noise:
                 noisy = self.kp.copy()
                 noisy[..., :2] += (_ar1_noise(rng, self.kp.shape[:2] + (2,), self.noise_sd, self.noise_rho)
                                    * per_joint[None, :, None])
-                kp = clean_keypoints(noisy, self.fps)
-            # the same contacts for every draw (detected once on the cleaned keypoints)
-            tr = fit_ground_track(cams, kp, self.fps, contacts=self.contacts)
-            seg = {k: float(v[s]) for k, v in L.items()}
-            res = lift(cams, kp, self.fps, segments_m=seg, track=tr, config=cfg)
-            joints[s] = res.joints_track_m
-            a = res.angles_deg()
-            for k in ANGLE_NAMES:
-                angles[k][s] = a[k]
-            for k, v in gait_summary(res.track, a, self.fps).items():
-                gait.setdefault(k, np.full(S, np.nan))[s] = v
+                variants.append(("", clean_keypoints(noisy, self.fps)))
+            for suffix, kp in variants:
+                # the same contacts for every draw (detected once on the cleaned keypoints)
+                tr = fit_ground_track(cams, kp, self.fps, contacts=self.contacts)
+                res = lift(cams, kp, self.fps, segments_m=seg, track=tr, config=cfg)
+                a = res.angles_deg()
+                out["joints" + suffix][s] = res.joints_track_m
+                for k in ANGLE_NAMES:
+                    out["angles" + suffix][k][s] = a[k]
+                if suffix == "_point":
+                    for k, v in gait_summary(res.track, a, self.fps).items():
+                        out["gait"].setdefault(k, np.full(S, np.nan))[s] = v
+            if not with_noise:
+                out["joints"][s] = out["joints_point"][s]
+                for k in ANGLE_NAMES:
+                    out["angles"][k][s] = out["angles_point"][k][s]
         self.timings["propagation_s"] = time.perf_counter() - t0
-        return joints, angles, gait
+        return out
 
     def _jitter_bridged(self, cams, rng, deg_per_frame=0.01, zoom_per_frame=0.002):
         """Uncertainty of bridged frames (no lanes): random pan/tilt and zoom growing with the

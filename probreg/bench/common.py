@@ -22,6 +22,7 @@ BENCHMARKS = {
     "registration": "probreg.bench.registration:run",
     "lifting": "probreg.bench.lifting:run",
     "posterior": "probreg.bench.posterior:run",
+    "band-calibration": "probreg.bench.band_calibration:run",
 }
 
 
