@@ -85,7 +85,7 @@ class NormalPrior(Prior):
         from scipy.stats import norm
 
         z = norm.ppf(0.5 + mass / 2)
-        return self.mean - z * self.sd, self.mean + z * self.sd
+        return float(self.mean - z * self.sd), float(self.mean + z * self.sd)
 
 
 @dataclass(frozen=True)
@@ -118,7 +118,7 @@ class LogNormalPrior(Prior):
         from scipy.stats import norm
 
         z = norm.ppf(0.5 + mass / 2)
-        return self.median * np.exp(-z * self.log_sd), self.median * np.exp(z * self.log_sd)
+        return float(self.median * np.exp(-z * self.log_sd)), float(self.median * np.exp(z * self.log_sd))
 
 
 @dataclass(frozen=True)
