@@ -203,6 +203,11 @@ def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: Tr
         contacts = detect_contacts(ankles, fps, config)
     contacts = np.asarray(contacts, bool)
     cps = _contact_points(ankles, contacts)
+    if len(cps) >= 3:
+        # athletes keep to their lane: a "contact" far off the clip's median lateral position
+        # is a swinging foot cast beyond the athlete, not a footprint
+        off = np.abs(cps[:, 3] - np.median(cps[:, 3]))
+        cps = cps[off < max(0.5, 4 * 1.4826 * np.median(off))]
     status = "ok"
     R_meas = np.diag(np.square(np.asarray(config.contact_std_m) * length_scale))
     # left feet land left of the line of travel, right feet right of it: remove half the
@@ -249,12 +254,22 @@ def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: Tr
     kf.P = np.diag([4.0, 4.0, 0.5, 0.1**2])
     xs, Ps = np.zeros((F, 4)), np.zeros((F, 4, 4))
     loglik = 0.0
+    n_rejected = 0
     for i in range(F):
         if i > 0:
             kf.predict()
         if i in meas:
-            kf.update(meas[i])
-            loglik += float(kf.log_likelihood)
+            # gate outliers: an innovation beyond ~4 sigma (chi-square, 2 dof, p ~ 3e-4) is
+            # not used, but still costs its log-likelihood so hypotheses cannot hide data
+            y = meas[i] - kf.H @ kf.x
+            S = kf.H @ kf.P @ kf.H.T + kf.R
+            nis = float(y @ np.linalg.solve(S, y))
+            if nis > 16.0 and i != keys[0]:
+                n_rejected += 1
+                loglik += -0.5 * 16.0 - 0.5 * float(np.log(np.linalg.det(2 * np.pi * S)))
+            else:
+                kf.update(meas[i])
+                loglik += float(kf.log_likelihood)
         xs[i], Ps[i] = kf.x, kf.P
     xs, Ps, _, _ = kf.rts_smoother(xs, Ps)
     return GroundTrack(position_m=xs[:, [0, 2]], velocity_mps=xs[:, [1, 3]], cov=Ps, contacts=contacts,
