@@ -110,30 +110,23 @@ class TrackGeometry:
         lane = np.floor(-np.asarray(y_m, float) / self.lane_width_m) + 1
         return np.where((lane >= 1) & (lane <= self.n_lanes), lane, 0).astype(int)
 
-    def infield_outline(self, n=90):
-        """Closed polygon (N, 3) of the infield edge (inner edge of lane 1)."""
-        r = self.inner_radius_m
+    def _oval(self, radius_m, n):
+        """Closed ground polygon (2n, 3): both bends at ``radius_m`` joined by the straights."""
         c0, c1 = self.bend_centers()
         a1 = np.linspace(-np.pi / 2, np.pi / 2, n)
-        a0 = np.linspace(np.pi / 2, 3 * np.pi / 2, n)
-        pts = np.concatenate([
-            np.stack([c1[0] + r * np.cos(a1), c1[1] + r * np.sin(a1)], -1),
-            np.stack([c0[0] + r * np.cos(a0), c0[1] + r * np.sin(a0)], -1),
-        ])
+        a0 = a1 + np.pi
+        pts = np.concatenate([c1 + radius_m * np.stack([np.cos(a1), np.sin(a1)], -1),
+                              c0 + radius_m * np.stack([np.cos(a0), np.sin(a0)], -1)])
         return np.concatenate([pts, np.zeros((len(pts), 1))], axis=1)
+
+    def infield_outline(self, n=90):
+        """Closed polygon (N, 3) of the infield edge (inner edge of lane 1)."""
+        return self._oval(self.inner_radius_m, n)
 
     def outer_outline(self, margin_m=0.0, n=90):
         """Closed polygon (N, 3) of the outer edge of the outermost lane plus ``margin_m``
         (the oval only; the straight's start area and run-out are :meth:`straight_surface`)."""
-        r = self.inner_radius_m + self.track_width_m + margin_m
-        c0, c1 = self.bend_centers()
-        a1 = np.linspace(-np.pi / 2, np.pi / 2, n)
-        a0 = np.linspace(np.pi / 2, 3 * np.pi / 2, n)
-        poly = np.concatenate([
-            np.stack([c1[0] + r * np.cos(a1), c1[1] + r * np.sin(a1)], -1),
-            np.stack([c0[0] + r * np.cos(a0), c0[1] + r * np.sin(a0)], -1),
-        ])
-        return np.concatenate([poly, np.zeros((len(poly), 1))], axis=1)
+        return self._oval(self.inner_radius_m + self.track_width_m + margin_m, n)
 
     def straight_surface(self, margin_m=0.0):
         """Rectangle (4, 3) of the home straight's lanes including start area and run-out."""
