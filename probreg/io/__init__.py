@@ -13,6 +13,7 @@ from .clip import (
     write_keypoints_json,
 )
 from .frames import has_frames, iter_frames, read_frame
+from .keypoints import read_keypoints
 from .results import read_angles_csv, write_angles_csv, write_joints_npz
 
 __all__ = [
@@ -32,4 +33,5 @@ __all__ = [
     "read_angles_csv",
     "write_angles_csv",
     "write_joints_npz",
+    "read_keypoints",
 ]
