@@ -412,6 +412,7 @@ def build_parser():
     b.add_argument("--repeats", type=int, default=None)
     b.add_argument("--jobs", type=int, default=None)
     b.add_argument("--suite-dir", type=Path, default=None, help="reuse an existing generated suite")
+    b.add_argument("--model", type=Path, default=None, help="ONNX pose model for 'bench detect'")
     b.set_defaults(func=_cmd_bench)
     return p
 

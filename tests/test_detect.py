@@ -142,3 +142,19 @@ def test_detect_command_writes_keypoints(tmp_path, small_clip):
     sy = np.zeros((1, 17, 512), np.float32)
     rtm = _constant_model(tmp_path / "r.onnx", (1, 3, 256, 192), {"simcc_x": sx, "simcc_y": sy})
     assert main(["detect", str(clip), "--model", str(rtm)]) == 2  # top-down needs a box
+
+
+def test_real_model_finds_the_runner_in_paper_frames(shared_data):
+    """Optional: the exported yolo11n-pose (``probreg models export-yolo``) finds a runner."""
+    from probreg.models import default_cache_dir
+
+    path = default_cache_dir() / "yolo11n-pose.onnx"
+    if not path.exists():
+        pytest.skip("no exported YOLO model (optional 'yolo' extra)")
+    model = load_pose_model(path)
+    found = 0
+    frames = sorted((shared_data / "paper_frames").glob("*.jpeg"))
+    for p in frames:
+        kp = detect_sequence([(0, cv2.imread(str(p)))], model)[0]
+        found += int(np.isfinite(kp[:, 0]).sum() >= 10)
+    assert found >= len(frames) - 2

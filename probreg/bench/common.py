@@ -23,6 +23,7 @@ BENCHMARKS = {
     "lifting": "probreg.bench.lifting:run",
     "posterior": "probreg.bench.posterior:run",
     "band-calibration": "probreg.bench.band_calibration:run",
+    "detect": "probreg.bench.detect:run",
 }
 
 
