@@ -125,6 +125,10 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
         raise ClipFormatError(f"{clip_dir}: no keypoints2d.json (run 'probreg detect' first)")
     if not has_frames(clip):
         raise ClipFormatError(f"{clip_dir}: no frames/ folder or video.mp4")
+    seen = int(np.sum(np.isfinite(clip.keypoints_px[..., 0]).sum(axis=1) >= 8))
+    if seen < 10:
+        raise ValueError(f"{clip_dir}: only {seen} frames have a detected athlete (at least 8 joints); "
+                         f"the model needs at least 10")
     reg = register_clip(clip)
     t1 = time.perf_counter()
     log(f"lanes: {reg.status_counts()} ({t1 - t0:.1f} s)")

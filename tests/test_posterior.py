@@ -138,3 +138,14 @@ def test_run_command_bad_input(tmp_path, capsys):
     (clip / "clip.json").write_text('{"fps": 50, "image_size": [1920, 1080], "n_frames": 2}')
     assert main(["run", str(clip), "--out", str(tmp_path / "o")]) == 2
     assert "keypoints2d.json" in capsys.readouterr().err
+
+
+def test_run_refuses_a_clip_without_detections(small_clip, tmp_path, capsys):
+    clip_dir = tmp_path / "clip"
+    shutil.copytree(small_clip, clip_dir)
+    doc = json.loads((clip_dir / "keypoints2d.json").read_text())
+    for f in doc["frames"]:
+        f["keypoints"] = None
+    (clip_dir / "keypoints2d.json").write_text(json.dumps(doc))
+    assert main(["run", str(clip_dir), "--out", str(tmp_path / "o")]) == 2
+    assert "detected athlete" in capsys.readouterr().err
