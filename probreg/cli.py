@@ -304,7 +304,7 @@ def _add_run_options(p):
     g.add_argument("--stature", type=float, default=None, help="athlete's stature prior mean (m); default 1.76")
     g.add_argument("--stature-sd", type=float, default=None, help="stature prior sd (m); default 0.10")
     g.add_argument("--walkers", type=int, default=24)
-    g.add_argument("--max-steps", type=int, default=4000, help="sampling budget (steps after burn-in)")
+    g.add_argument("--max-steps", type=int, default=8000, help="sampling budget (steps after burn-in)")
     g.add_argument("--draws", type=int, default=60, help="posterior draws propagated to angles")
     g.add_argument("--dist", default=None, help="known lens distortion k1,k2,p1,p2,k3 (use --dist=...)")
     g.add_argument("--min-score", type=float, default=0.3)

@@ -126,7 +126,7 @@ class SamplerSettings:
 
     n_walkers: int = 24
     tau_multiple: float = 50.0
-    max_steps: int = 4000
+    max_steps: int = 8000
     chunk: int = 250
     burn_in: int = 200
     n_draws: int = 60
