@@ -98,15 +98,8 @@ def _cmd_demo(args):
 
 
 def _parse_dist(text):
-    if text is None:
-        return None
-    try:
-        vals = [float(v) for v in text.split(",")]
-    except ValueError:
-        raise CliError(f"--dist needs five comma-separated numbers k1,k2,p1,p2,k3, got {text!r}") from None
-    if len(vals) != 5:
-        raise CliError(f"--dist needs five numbers k1,k2,p1,p2,k3, got {len(vals)}")
-    return vals
+    """``--dist k1,k2,p1,p2,k3`` (OpenCV order)."""
+    return _parse_floats(text, 5, "--dist (k1,k2,p1,p2,k3)")
 
 
 def _cmd_calibrate(args):
