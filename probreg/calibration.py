@@ -319,18 +319,6 @@ class CalibrationFamily:
         return m.camera(self.image_size, self.principal_point, line_offset=line_offset, x_m=x_m,
                         dist=dist, lane_width_m=self.lane_width_m)
 
-    def line_residuals_px(self, camera: Camera, points_per_line, line_offset=0):
-        """Signed distances (px) of each line's support points from the line ``camera`` projects
-        for the same lane-line index (``line_offset`` = absolute index of observed line 0)."""
-        P = camera.projection_matrix
-        out = []
-        for k, pts in zip(self.indices, points_per_line):
-            y = -self.lane_width_m * (k + line_offset)
-            line = np.cross(P @ np.array([0.0, y, 0.0, 1.0]), P @ np.array([1.0, y, 0.0, 1.0]))
-            line /= np.hypot(line[0], line[1])
-            out.append(np.asarray(pts) @ line[:2] + line[2])
-        return out
-
 
 class FamilyParameter(ABC):
     """A scalar that selects one member of a calibration family (one small class per choice)."""
@@ -433,10 +421,10 @@ PARAMETERS = {"height": HeightParameter(), "fov": FovParameter(), "azimuth": Azi
 class SequenceCalibration:
     """Per-frame families of a clip from one static camera.
 
-    One height selects a member in every frame.  The absolute lane index of
-    each frame's innermost observed line is made consistent across frames
-    (the static camera's lateral position must not jump by a lane width) and
-    anchored to ``athlete_lane`` when the athlete's ground position is known.
+    One height selects a member in every frame; ``line_offsets`` holds the absolute
+    lane-line index of each frame's innermost observed line (set by
+    :meth:`probreg.registration.ClipRegistration.track_offsets` and
+    :func:`probreg.registration.lane_anchor_shift`).
     """
 
     families: list  # CalibrationFamily or None per frame
@@ -453,9 +441,6 @@ class SequenceCalibration:
     def n_frames(self):
         return len(self.families)
 
-    def valid_frames(self):
-        return [i for i, f in enumerate(self.families) if f is not None]
-
     def members_at_height(self, height_m):
         """FamilyMember (or None where a frame has no family or no such member) per frame."""
         out = []
@@ -469,24 +454,6 @@ class SequenceCalibration:
                 out.append(None)
         return out
 
-    def harmonise_offsets(self, height_m):
-        """Choose per-frame line-index offsets so the camera's lateral position is constant."""
-        mem = self.members_at_height(height_m)
-        ys = np.array([m.y_m if m is not None else np.nan for m in mem])
-        ok = np.isfinite(ys)
-        if not ok.any():
-            return self
-        ref = np.median(ys[ok])
-        # candidate offsets: shifting the index by k moves y by -k * lane width
-        off = np.zeros(len(ys), int)
-        for i in np.flatnonzero(ok):
-            off[i] = int(np.round((ys[i] - ref) / self.lane_width_m))
-        # re-centre on the most common offset
-        vals, counts = np.unique(off[ok], return_counts=True)
-        off -= vals[np.argmax(counts)]
-        self.line_offsets = off
-        return self
-
     def cameras_at_height(self, height_m, extra_offset=0, x_m=0.0, dist=None):
         """Per-frame cameras (None where unavailable) of the member at ``height_m``."""
         out = []
@@ -497,43 +464,3 @@ class SequenceCalibration:
             out.append(m.camera(self.image_size, fam.principal_point, line_offset=off + extra_offset,
                                 x_m=x_m, dist=dist, lane_width_m=self.lane_width_m))
         return out
-
-    def consistency_m(self, height_m):
-        """Spread (robust std, m) of the implied lateral camera position over the clip."""
-        cams = self.cameras_at_height(height_m)
-        ys = np.array([c.C[1] for c in cams if c is not None])
-        if len(ys) < 2:
-            return float("nan")
-        return float(1.4826 * np.median(np.abs(ys - np.median(ys))))
-
-    def anchor_to_athlete(self, height_m, ground_points_px, athlete_lane, ground_height_m=0.0):
-        """Absolute line offset from the athlete's ground contact (e.g. ankles) in the given lane.
-
-        Parameters
-        ----------
-        ground_points_px : ndarray, shape (F, K, 2)
-            Image points that lie on (or just above) the ground, NaN where missing.
-        athlete_lane : int
-            1-based lane.
-        ground_height_m : float
-            Height of those points above the ground (ankle joints: about 0.07 m).
-
-        Returns
-        -------
-        int
-            The extra offset to pass to :meth:`cameras_at_height`.
-        """
-        cams = self.cameras_at_height(height_m)
-        ys = []
-        for cam, pts in zip(cams, ground_points_px):
-            if cam is None:
-                continue
-            p = pts[np.all(np.isfinite(pts), -1)]
-            if len(p):
-                g = cam.cast_to_ground(p, height_m=ground_height_m)
-                ys.extend(g[np.isfinite(g[:, 1]), 1])
-        if not ys:
-            return 0
-        y = float(np.median(ys))
-        centre = -self.lane_width_m * (athlete_lane - 0.5)
-        return int(np.round((y - centre) / self.lane_width_m))

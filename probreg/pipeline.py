@@ -59,7 +59,7 @@ def _arviz():
     return az
 
 
-def posterior_inference_data(sampler, burn=0, keypoints_px=None, frame_lanes=None, coords=None):
+def posterior_inference_data(sampler, burn=0, keypoints_px=None, frame_lanes=None):
     """ArviZ InferenceData from the emcee sampler (``az.from_emcee``), with the observed
     keypoints and vanishing points as ``observed_data`` and derived quantities."""
     az = _arviz()

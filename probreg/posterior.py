@@ -37,7 +37,7 @@ keypoints), giving joint and angle samples and so credible bands.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass
 
 import numpy as np
 
@@ -45,11 +45,11 @@ from .filtering import clean_keypoints
 from .kinematics import gait_summary
 from .lifting import CameraArrays, LiftConfig, estimate_segments, lift
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
-from .registration import ClipRegistration, athlete_ground_track
+from .registration import ClipRegistration, athlete_ground_track, lane_anchor_shift
 from .skeleton import ANGLE_NAMES, JOINT_INDEX
 from .trajectory import fit_ground_track
 
-__all__ = ["ClipModel", "SamplerSettings", "PosteriorResult", "noise_model", "PARAM_NAMES", "angle_bands",
+__all__ = ["ClipModel", "SamplerSettings", "noise_model", "PARAM_NAMES", "angle_bands",
            "BAND_INFLATION"]
 
 #: Scale of the bootstrap deviations in the reported bands, calibrated on held-out synthetic
@@ -132,36 +132,6 @@ class SamplerSettings:
     n_draws: int = 60
     bootstrap_noise: bool = True
     seed: int = 0
-
-
-@dataclass
-class PosteriorResult:
-    """Everything the model produced for a clip."""
-
-    chain: np.ndarray               # (steps, walkers, D) after burn-in
-    log_prob: np.ndarray            # (steps, walkers)
-    acceptance: float
-    tau: np.ndarray                 # (D,)
-    draws: np.ndarray               # (S, D) propagated draws
-    joints_samples: np.ndarray      # (S, F, 17, 3)
-    angle_samples: dict             # name -> (S, F)
-    gait_samples: dict              # name -> (S,)
-    diagnostics: dict = field(default_factory=dict)
-    timings: dict = field(default_factory=dict)
-
-    def height_samples(self):
-        return np.exp(self.chain[..., 0]).ravel()
-
-    def angle_summary(self, lo=5.0, hi=95.0):
-        """Per angle: median, lo, hi quantiles over samples, each (F,)."""
-        import warnings
-
-        out = {}
-        with warnings.catch_warnings():
-            warnings.simplefilter("ignore", RuntimeWarning)
-            for k, v in self.angle_samples.items():
-                out[k] = (np.nanmedian(v, 0), np.nanpercentile(v, lo, 0), np.nanpercentile(v, hi, 0))
-        return out
 
 
 class ClipModel:
@@ -327,16 +297,10 @@ class ClipModel:
         reg = self.reg
         seq = reg.sequence
         seq.branch = self.branch
-        base = reg._track_offsets(seq, self.h_ref)
-        self.offsets = np.asarray(base, int)
+        self.offsets = np.asarray(reg.track_offsets(seq, self.h_ref), int)
         cams = self.cameras_at(self.h_ref, offsets=self.offsets)
-        track = athlete_ground_track(_as_list(cams), self.kp)
-        ok = np.all(np.isfinite(track), -1)
-        if ok.any():
-            w = reg.lane_width_m
-            yv = float(np.median(track[ok, 1]))
-            lane = self.athlete_lane if self.athlete_lane is not None else int(np.floor(-yv / w)) + 1
-            self.offsets = self.offsets + int(np.round((yv + w * (lane - 0.5)) / w))
+        self.offsets = self.offsets + lane_anchor_shift(athlete_ground_track(_as_list(cams), self.kp),
+                                                        self.athlete_lane, reg.lane_width_m)
 
     # ------------------------------------------------------------------ likelihood on a grid
     def _precompute(self):
@@ -345,7 +309,6 @@ class ClipModel:
         self.ll_static = np.full(G, -np.inf)
         self.seg_obs = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
         self.seg_se = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
-        self.tracks = []
         # contacts are detected once (reference height) so every hypothesis is scored on the
         # same measurements; the filter's noise scales with the hypothesis (scale ~ height)
         ref = fit_ground_track(self.cameras_at(self.h_ref), self.kp, self.fps)
@@ -354,11 +317,9 @@ class ClipModel:
         for g, h in enumerate(self.grid):
             cams = self.cameras_at(h)
             if cams.valid.sum() < 3:
-                self.tracks.append(None)
                 continue
             tr = fit_ground_track(cams, self.kp, self.fps, contacts=self.contacts,
                                   config=self._track_config(cams))
-            self.tracks.append(tr)
             # tempered to one contact's worth: the filter's innovations are not independent
             # (the same feet, seen through one camera path), and its value under wrong
             # heights is dominated by unmodelled effects; undamped it would swamp every
@@ -597,10 +558,6 @@ class ClipModel:
         trunk = np.nanmean(rms[[JOINT_INDEX["pelvis"], JOINT_INDEX["spine"], JOINT_INDEX["thorax"]]])
         scale = rms / trunk if np.isfinite(trunk) and trunk > 0 else np.ones(17)
         return np.where(np.isfinite(scale), np.clip(scale, 0.5, 3.0), 1.0)
-
-    def estimate_segments_at(self, h):
-        cams = self.cameras_at(h)
-        return estimate_segments(cams, self.kp, fit_ground_track(cams, self.kp, self.fps), self.fps)
 
 
 def _ar1_noise(rng, shape, sd, rho):

@@ -26,6 +26,7 @@ __all__ = [
     "ClipRegistration",
     "athlete_ground_track",
     "running_sign",
+    "lane_anchor_shift",
     "register_frames",
     "register_clip",
 ]
@@ -56,6 +57,29 @@ def athlete_ground_track(cameras, keypoints_px, ground_height_m=ANKLE_HEIGHT_M):
                 # the ankle height, lands beyond the athlete
                 out[i] = g[np.argmin(np.linalg.norm(g - cam.C, axis=1)), :2]
     return out
+
+
+def lane_anchor_shift(ground_track_m, athlete_lane=None, lane_width_m=1.22):
+    """Whole-lane shift of the line indices that puts the athlete in their lane.
+
+    One constant for the clip: the athlete's feet lie in ``athlete_lane`` (1-based), or,
+    when it is not given, in the lane holding the median of the ground track.
+
+    Parameters
+    ----------
+    ground_track_m : ndarray, shape (F, 2)
+        The athlete's ground position per frame (NaN where unknown), with the current offsets.
+
+    >>> lane_anchor_shift(np.array([[0.0, -3.05 - 2.44]]), athlete_lane=3)
+    -2
+    """
+    ok = np.all(np.isfinite(ground_track_m), -1)
+    if not ok.any():
+        return 0
+    w = lane_width_m
+    y = float(np.median(ground_track_m[ok, 1]))
+    lane = athlete_lane if athlete_lane is not None else int(np.floor(-y / w)) + 1
+    return int(np.round((y + w * (lane - 0.5)) / w))
 
 
 def running_sign(cameras, keypoints_px):
@@ -117,18 +141,11 @@ class ClipRegistration:
                     fams[i] = _family_or_none(ufl, self.forward_px, self.lane_width_m)
             seq = SequenceCalibration(fams, self.image_size, self.lane_width_m)
         seq.branch = branch
-        seq.line_offsets = self._track_offsets(seq, height_m)
+        seq.line_offsets = self.track_offsets(seq, height_m)
         extra = 0
         if keypoints_px is not None:
-            # one constant for the clip: the athlete's feet lie in one lane (the given one,
-            # or the clip's most common one)
-            track = athlete_ground_track(seq.cameras_at_height(height_m), keypoints_px)
-            ok = np.all(np.isfinite(track), -1)
-            if ok.any():
-                w = self.lane_width_m
-                y = float(np.median(track[ok, 1]))
-                lane = athlete_lane if athlete_lane is not None else int(np.floor(-y / w)) + 1
-                extra = int(np.round((y + w * (lane - 0.5)) / w))
+            extra = lane_anchor_shift(athlete_ground_track(seq.cameras_at_height(height_m), keypoints_px),
+                                      athlete_lane, self.lane_width_m)
         cams = seq.cameras_at_height(height_m, extra_offset=extra, dist=dist)
         status = [fl.status for fl in self.frame_lanes]
         for i, c in enumerate(cams):
@@ -143,7 +160,7 @@ class ClipRegistration:
         return cams, info
 
 
-    def _track_offsets(self, seq, height_m):
+    def track_offsets(self, seq, height_m):
         """Per-frame line-index offsets that give every physical line (``track_id``) one
         absolute index over the clip; frames that share no line with the previous ones fall
         back to the camera's lateral position."""
@@ -179,7 +196,7 @@ class ClipRegistration:
         """
         seq = self.sequence
         seq.branch = branch
-        seq.line_offsets = self._track_offsets(seq, height_m)
+        seq.line_offsets = self.track_offsets(seq, height_m)
         if running_sign(seq.cameras_at_height(height_m), keypoints_px) < 0:
             self.forward_px = -self.forward_px
             fams = [_family_or_none(fl, self.forward_px, self.lane_width_m) for fl in self.frame_lanes]

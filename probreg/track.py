@@ -105,11 +105,6 @@ class TrackGeometry:
             out[b, :, 1] = centre[1] + radius * np.sin(a)
         return out
 
-    def lane_of_y(self, y_m):
-        """1-based lane containing lateral position ``y_m`` on the straight (0 outside)."""
-        lane = np.floor(-np.asarray(y_m, float) / self.lane_width_m) + 1
-        return np.where((lane >= 1) & (lane <= self.n_lanes), lane, 0).astype(int)
-
     def _oval(self, radius_m, n):
         """Closed ground polygon (2n, 3): both bends at ``radius_m`` joined by the straights."""
         c0, c1 = self.bend_centers()

@@ -172,7 +172,7 @@ def _contact_points(ankles_m, contacts):
 
 
 def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: TrackConfig = TrackConfig(),
-                     contacts=None, length_scale=1.0):
+                     contacts=None):
     """Contacts and the Kalman/RTS-smoothed ground track of the athlete.
 
     Parameters
@@ -186,9 +186,6 @@ def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: Tr
     contacts : ndarray of bool (F, 2), optional
         Fixed contact flags (e.g. detected once for a reference camera), so that
         the filter sees the same measurements under every camera hypothesis.
-    length_scale : float
-        Scales the filter's noise model (metres) with the hypothesis' scale, so that
-        its log-likelihood compares hypotheses of different size fairly.
 
     Returns
     -------
@@ -209,7 +206,7 @@ def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: Tr
         off = np.abs(cps[:, 3] - np.median(cps[:, 3]))
         cps = cps[off < max(0.5, 4 * 1.4826 * np.median(off))]
     status = "ok"
-    R_meas = np.diag(np.square(np.asarray(config.contact_std_m) * length_scale))
+    R_meas = np.diag(np.square(np.asarray(config.contact_std_m)))
     # left feet land left of the line of travel, right feet right of it: remove half the
     # step width (estimated from the clip) so that contacts measure the centre line
     half_step = 0.0
@@ -235,8 +232,8 @@ def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: Tr
     kf.F = np.kron(np.eye(2), np.array([[1.0, dt], [0.0, 1.0]]))
     kf.H = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
     kf.Q = np.zeros((4, 4))
-    kf.Q[:2, :2] = Q_discrete_white_noise(2, dt=dt, var=(config.accel_std_mps2[0] * length_scale) ** 2)
-    kf.Q[2:, 2:] = Q_discrete_white_noise(2, dt=dt, var=(config.accel_std_mps2[1] * length_scale) ** 2)
+    kf.Q[:2, :2] = Q_discrete_white_noise(2, dt=dt, var=config.accel_std_mps2[0] ** 2)
+    kf.Q[2:, 2:] = Q_discrete_white_noise(2, dt=dt, var=config.accel_std_mps2[1] ** 2)
     kf.R = R_meas
     keys = sorted(meas)
     if not keys:

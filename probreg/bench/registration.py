@@ -185,6 +185,15 @@ def _paper_frames(data, rep, overlay_dir):
     return n_good, len(rows)
 
 
+def _family_member(fl, height_m=10.0):
+    """The work timed per frame after the lanes: family and its member at a height."""
+    if fl.ok:
+        try:
+            CalibrationFamily.from_frame_lanes(fl).member(height_m=height_m)
+        except CalibrationError:
+            pass
+
+
 def _speed(rep, root):
     """Per-frame time on one core: from scratch (Hough) and inside a clip (line tracking)."""
     cv2.setNumThreads(1)
@@ -194,26 +203,14 @@ def _speed(rep, root):
         for name in ("run_a", "tele_a", "wide_a", "distorted_a"):
             clip = load_clip(root / name)
             imgs = [cv2.imread(str(p)) for p in clip.frame_paths[:100]]
-            scratch, seq = [], []
+            scratch = []
             for img in imgs[:40]:
                 t0 = time.perf_counter()
-                fl = detect_lanes(img)
-                if fl.ok:
-                    try:
-                        CalibrationFamily.from_frame_lanes(fl).member(height_m=10.0)
-                    except CalibrationError:
-                        pass
+                _family_member(detect_lanes(img))
                 scratch.append(time.perf_counter() - t0)
             t0 = time.perf_counter()
-            fls = track_lanes(enumerate(imgs))
-            for fl in fls:
-                t1 = time.perf_counter()
-                if fl.ok:
-                    try:
-                        CalibrationFamily.from_frame_lanes(fl).member(height_m=10.0)
-                    except CalibrationError:
-                        pass
-                seq.append(time.perf_counter() - t1)
+            for fl in track_lanes(enumerate(imgs)):
+                _family_member(fl)
             per_frame_seq = (time.perf_counter() - t0) / len(imgs)
             rows.append([name, 1000 * np.median(scratch), 1000 * per_frame_seq])
             medians.setdefault("scratch", []).extend(scratch)
