@@ -36,7 +36,7 @@ from dataclasses import dataclass, field
 import numpy as np
 from scipy.optimize import brentq
 
-from .camera import Camera, focal_from_fov, fov_from_focal
+from .camera import Camera, cross3, focal_from_fov, fov_from_focal
 from .lanes import FrameLanes
 
 __all__ = [
@@ -190,7 +190,7 @@ class CalibrationFamily:
             sel = np.flatnonzero(inside) if inside.any() else np.flatnonzero(front)[:2]
             a, b = pts[front][sel[0]], pts[front][sel[-1]]
             pa, pb = P @ a, P @ b
-            lines.append(np.cross(pa, pb))  # the image line through two projected points
+            lines.append(cross3(pa, pb))  # the image line through two projected points
             idx.append(i)
             samples.append(px[sel[len(sel) // 2]] if inside.any() else px[0])
             if fwd is None:
@@ -228,16 +228,16 @@ class CalibrationFamily:
         n = np.stack([f[:, None] * L[None, :, 0], f[:, None] * L[None, :, 1],
                       np.broadcast_to(L[:, 0] * cx + L[:, 1] * cy + L[:, 2], (len(f), len(L)))], -1)
         n /= np.linalg.norm(n, axis=-1, keepdims=True)
-        wv = np.cross(r1[:, None, :], n)
+        wv = cross3(r1[:, None, :], n)
         wv /= np.linalg.norm(wv, axis=-1, keepdims=True)
         d = np.stack([(self.samples[:, 0] - cx)[None] / f[:, None], (self.samples[:, 1] - cy)[None] / f[:, None],
                       np.ones((len(f), len(L)))], -1)
         wv *= np.sign(np.sum(wv * d, -1, keepdims=True))
         # cross-section basis (a, b) with a x b = r1
         helper = np.where(np.abs(r1[..., 1:2]) < 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
-        a = np.cross(helper, r1)
+        a = cross3(helper, r1)
         a /= np.linalg.norm(a, axis=-1, keepdims=True)
-        b = np.cross(r1, a)
+        b = cross3(r1, a)
         th = np.arctan2(np.sum(wv * b[:, None], -1), np.sum(wv * a[:, None], -1))  # (F, n)
         # equal-spacing condition for triples (0, j, j+1): rows linear in (cos phi, sin phi)
         k = self.indices
@@ -257,7 +257,7 @@ class CalibrationFamily:
         flip = np.sum(cosd, -1) > 0
         u[flip] *= -1
         cosd[flip] *= -1
-        ey = np.cross(u, r1)
+        ey = cross3(u, r1)
         g = -np.sum(wv * ey[:, None], -1) / cosd  # lateral offsets / h
         # affine fit g = A + B k  ->  h = -lane_width / B
         kc = k - k.mean()
@@ -356,8 +356,10 @@ class FamilyParameter(ABC):
         i = cross[-1] if branch == "narrow" else cross[0]
         # refine the bracket on finer log grids (vectorised evaluations), then interpolate
         lo, hi = np.log(f[i]), np.log(f[i + 1])
-        for _ in range(3):
-            grid = np.linspace(lo, hi, 17)
+        # two refinements shrink the bracket to ~5e-5 in log f; the final linear
+        # interpolation is then exact to ~1e-10 (the family is smooth in log f)
+        for _ in range(2):
+            grid = np.linspace(lo, hi, 33)
             fx = np.exp(grid)
             mm = family.members(fx)
             d = np.where(mm["valid"], self.values(family, fx, mm), np.nan) - value

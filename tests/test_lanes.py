@@ -1,5 +1,7 @@
 """Lane detection, vanishing points, statuses, tracking and round trips on rendered frames."""
 
+from dataclasses import replace
+
 import cv2
 import numpy as np
 import pytest
@@ -137,3 +139,26 @@ def test_paper_frames_give_three_lines_and_a_family(shared_data):
 
 def test_render_style_default_is_supersampled():
     assert RenderStyle().supersample >= 4
+
+
+def _vp_dir(cam_true, v_px):
+    r = np.linalg.solve(cam_true.K, v_px)
+    return np.degrees(np.arccos(min(1.0, abs(r @ (cam_true.R @ [1.0, 0.0, 0.0])) / np.linalg.norm(r))))
+
+
+def test_smoothing_gates_an_outlier_vanishing_point():
+    """A frame whose vanishing point jumps (e.g. a mis-detected line) is bridged, not followed."""
+    rng = np.random.default_rng(7)
+    cams = [Camera.look_at([42, -62, 13], [33 + 0.2 * k, -4, 0.5], fov_deg=14.0, roll_deg=0.8) for k in range(12)]
+    fls = track_lanes([(k, _render(c, rng)) for k, c in enumerate(cams)])
+    assert all(f.ok for f in fls)
+    bad = 8
+    u = fls[bad].extra.get("vp_unit")
+    assert u is not None
+    tilt = np.array([[1.0, 0.0, 0.0], [0.0, np.cos(0.02), -np.sin(0.02)], [0.0, np.sin(0.02), np.cos(0.02)]])
+    fls[bad] = replace(fls[bad], extra={**fls[bad].extra, "vp_unit": tilt @ u})
+    sm = smooth_vanishing_points(fls)
+    assert sm[bad].extra["vp_gated"] and not any(f.extra["vp_gated"] for i, f in enumerate(sm) if i != bad)
+    assert _vp_dir(cams[bad], sm[bad].vanishing_point) < 0.05
+    no_gate = smooth_vanishing_points(fls, gate_chi2=None)
+    assert _vp_dir(cams[bad], no_gate[bad].vanishing_point) > 2 * _vp_dir(cams[bad], sm[bad].vanishing_point)
