@@ -8,11 +8,14 @@ detection does not smear over its neighbours.
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 from scipy.ndimage import median_filter
 from scipy.signal import butter, filtfilt
 
-__all__ = ["hampel", "fill_gaps", "butterworth", "clean_keypoints", "keypoint_noise_px"]
+__all__ = ["hampel", "fill_gaps", "butterworth", "clean_keypoints", "keypoint_noise_px", "noise_model",
+           "periodic_smooth", "stride_period_frames"]
 
 
 def keypoint_noise_px(keypoints_px, joints=(0, 7, 8)):
@@ -36,6 +39,36 @@ def keypoint_noise_px(keypoints_px, joints=(0, 7, 8)):
     if len(d2) < 10:
         return float("nan")
     return float(1.4826 * np.median(np.abs(d2)) / np.sqrt(12))
+
+
+def noise_model(keypoints_px, joints=(0, 7, 8)):
+    """Detector noise of a clip: per-coordinate sd (px) and frame-to-frame correlation.
+
+    Uses the trunk joints relative to the pelvis (camera motion cancels, the
+    trunk's own motion over a few frames is small).  For AR(1) noise with sd
+    ``s`` and lag-1 correlation ``r``, differences over ``k`` frames have
+    variance ``2 s^2 (1 - r^k)`` (doubled again for the difference of two
+    joints); lags 1 and 2 give ``r = v2 / v1 - 1`` and then ``s``.  Robust
+    (MAD) variances keep detector outliers out.
+
+    Returns
+    -------
+    sd_px : float
+    rho : float
+    """
+    kp = np.asarray(keypoints_px, float)[:, list(joints), :2]
+    rel = kp[:, 1:] - kp[:, :1]
+
+    def robust_var(k):
+        d = rel[k:] - rel[:-k]
+        d = d[np.isfinite(d)]
+        return (1.4826 * np.median(np.abs(d))) ** 2 / 2 if len(d) >= 20 else np.nan
+
+    v1, v2 = robust_var(1), robust_var(2)
+    if not (np.isfinite(v1) and np.isfinite(v2)) or v1 <= 0:
+        return float("nan"), 0.0
+    rho = float(np.clip(v2 / v1 - 1.0, 0.0, 0.9))
+    return float(np.sqrt(v1 / (2 * (1 - rho)))), rho
 
 
 def hampel(x, half_window=4, n_sigma=3.0, min_scale=1.0):
@@ -101,9 +134,11 @@ def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=
         ``(x, y, score)``; NaN = missing.
     fps : float
     cutoff_hz : float, "auto" or None
-        Low-pass cut-off (None: no low-pass; "auto": 7 Hz when the estimated detection
-        noise exceeds ``noise_floor_px``, otherwise none; a low-pass also flattens the
-        true knee-flexion peaks, so clean keypoints are better left alone).
+        Low-pass cut-off (None: no low-pass; "auto": when the estimated detection
+        noise exceeds ``noise_floor_px``, cross-stride smoothing
+        (:func:`periodic_smooth`) or, for clips without repeating strides, a 7 Hz
+        Butterworth low-pass; otherwise none: a low-pass also flattens the true
+        knee-flexion peaks, so clean keypoints are better left alone).
 
     Returns
     -------
@@ -111,13 +146,15 @@ def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=
         Cleaned coordinates; filled joints get score 0.5 (still usable), unfillable stay NaN.
     """
     kp = np.asarray(keypoints_px, float)
-    noise = keypoint_noise_px(kp) if kp.shape[1] == 17 else np.inf
+    noise = noise_model(kp)[0] if kp.shape[1] == 17 else np.inf
     noisy = not np.isfinite(noise) or noise > noise_floor_px
+    periodic = cutoff_hz == "auto" and noisy
     if cutoff_hz == "auto":
         cutoff_hz = 7.0 if noisy else None
     # outlier scale: a clean track's own curvature at turning points must not look like an outlier
     scale = max(1.0, 2.0 * noise) if np.isfinite(noise) else 1.0
     out = kp.copy()
+    pre = kp.copy()  # outlier-free and gap-filled, before any low-pass
     for j in range(kp.shape[1]):
         cols = []
         for c in range(2):
@@ -126,12 +163,204 @@ def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=
         # an outlier in x or y removes the joint
         bad = ~np.isfinite(cols[0]) | ~np.isfinite(cols[1])
         for c in range(2):
-            x = np.where(bad, np.nan, cols[c])
-            x = fill_gaps(x, max_gap)
-            if cutoff_hz:
-                x = butterworth(x, fps, cutoff_hz)
-            out[:, j, c] = x
+            x = fill_gaps(np.where(bad, np.nan, cols[c]), max_gap)
+            pre[:, j, c] = x
+            out[:, j, c] = butterworth(x, fps, cutoff_hz) if cutoff_hz else x
         filled = np.isfinite(out[:, j, 0]) & ~np.isfinite(kp[:, j, 2])
         out[filled, j, 2] = 0.5
         out[~np.isfinite(out[:, j, 0]), j] = np.nan
+    if periodic:
+        sm = periodic_smooth(pre, fps, noise_px=noise)
+        if sm is not None:  # else: clip without repeating strides, keep the low-pass
+            ok = np.isfinite(out[..., 0]) & np.all(np.isfinite(sm[..., :2]), -1)
+            out[..., :2] = np.where(ok[..., None], sm[..., :2], out[..., :2])
+    return out
+
+
+# --------------------------------------------------------------------------- cross-stride smoothing
+#: Trunk joints (H36M order) whose smoothed mean is the reference point of the relative coordinates.
+_TRUNK = (0, 1, 4, 7, 8, 11, 14)
+
+
+def _lowpass_series(x, fps, cutoff_hz):
+    """Butterworth low-pass of every column of a (F, ...) array (NaN-tolerant)."""
+    flat = x.reshape(len(x), -1)
+    out = np.column_stack([butterworth(flat[:, k], fps, cutoff_hz) for k in range(flat.shape[1])])
+    return out.reshape(x.shape)
+
+
+def stride_period_frames(rel, fps, min_s=0.45, max_s=1.6):
+    """Stride period (frames, fractional) of pelvis-relative keypoints: the lag that best
+    repeats the whole-body pattern (mean squared difference, parabolic refinement).
+
+    Returns NaN when the clip is shorter than 1.5 periods or shows no clear repetition.
+    """
+    F = len(rel)
+    y = rel.reshape(F, -1)
+    lags = np.arange(max(2, int(min_s * fps)), min(int(max_s * fps), int(F / 1.5)) + 1)
+    if len(lags) < 3:
+        return float("nan")
+    d = np.full(len(lags), np.nan)
+    for i, L in enumerate(lags):
+        diff = y[L:] - y[:-L]
+        ok = np.isfinite(diff)
+        if ok.sum() > 10:
+            d[i] = np.mean(diff[ok] ** 2)
+    if not np.isfinite(d).any():
+        return float("nan")
+    i = int(np.nanargmin(d))
+    # a repeating pattern: an interior minimum well below the mismatch at shorter lags
+    # (for running, the step lag swaps left and right); drifting tracks grow with the lag
+    if not (0 < i < len(lags) - 1 and d[i] < 0.5 * np.nanmax(d[:i])):
+        return float("nan")
+    if 0 < i < len(lags) - 1 and np.all(np.isfinite(d[i - 1:i + 2])):
+        den = d[i - 1] - 2 * d[i] + d[i + 1]
+        off = 0.5 * (d[i - 1] - d[i + 1]) / den if den > 0 else 0.0
+        return float(lags[i] + np.clip(off, -0.5, 0.5))
+    return float(lags[i])
+
+
+def _local_lags(y, T0, half_window=6, search=3.0, step=0.1):
+    """Per-frame lag (frames) to the same stride phase one stride later: windowed search
+    around ``T0`` (the stride time varies from stride to stride), median-smoothed."""
+    F = len(y)
+    cand = np.arange(T0 - search, T0 + search + 1e-9, step)
+    t = np.arange(F, dtype=float)
+    cost = np.full((len(cand), F), np.inf)
+    g = np.exp(-0.5 * (np.arange(-half_window, half_window + 1) / (half_window / 2)) ** 2)
+    for i, L in enumerate(cand):
+        pos = t + L
+        k = np.floor(pos).astype(int)
+        a = pos - k
+        ok = k + 1 < F
+        diff = np.full(y.shape, np.nan)
+        diff[ok] = y[ok] - ((1 - a[ok, None]) * y[k[ok]] + a[ok, None] * y[k[ok] + 1])
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # frames without a partner
+            e = np.nanmean(diff**2, axis=1)
+        valid = np.isfinite(e)
+        num = np.convolve(np.where(valid, e, 0.0), g, mode="same")
+        den = np.convolve(valid.astype(float), g, mode="same")
+        with np.errstate(invalid="ignore", divide="ignore"):
+            cost[i] = np.where(den > 0.5 * g.sum(), num / den, np.inf)
+    best = cand[np.argmin(cost, axis=0)]
+    has = np.isfinite(cost).any(0)
+    lag = np.where(has, best, np.nan)
+    if np.isfinite(lag).sum() >= 3:
+        lag = median_filter(np.where(np.isfinite(lag), lag, T0), size=2 * half_window + 1, mode="nearest")
+        lag[~has] = np.nan
+    return lag
+
+
+def periodic_smooth(keypoints_px, fps, noise_px=None, smooth_cutoff_hz=9.0, lag_sd_frames=0.35,
+                    min_strides=2.0):
+    """Cross-stride smoothing of keypoint tracks: running repeats itself, noise does not.
+
+    A runner's stride repeats with small stride-to-stride changes, while
+    detector noise is new in every frame.  Each joint's track relative to the
+    smoothed trunk is estimated by penalised least squares::
+
+        sum_t |x_t - y_t|^2 / s_n^2  +  sum_t |x_t - x(t + tau_t)|^2 / s_c,t^2  +  smoothness
+
+    with ``tau_t`` the local stride period (frames; found by matching the
+    whole-body pattern, it follows stride-time changes) and ``x(t + tau_t)``
+    linearly interpolated.  ``s_n`` is the detection noise; the coupling
+    variance ``s_c,t^2 = 2 s_v^2 + (v_t * lag_sd)^2`` holds the joint's own
+    stride-to-stride variability ``s_v`` (estimated from the clip: repeat
+    differences minus twice the noise) and the timing uncertainty, which
+    matters where the joint moves fast (``v_t``: its speed), so fast phases
+    are coupled loosely and the true stride-to-stride differences survive.
+    The smoothness term is a second-difference penalty with its half-power
+    point at ``smooth_cutoff_hz``.  Relative coordinates are divided by a
+    slowly varying body scale so that zoom does not read as a change of
+    posture.
+
+    Parameters
+    ----------
+    keypoints_px : ndarray (F, J, 3)
+        Gap-filled keypoints (NaN = missing; missing frames are filled by the
+        prior and set back to NaN).
+    fps : float
+    noise_px : float, optional
+        Detection noise (px); estimated with :func:`noise_model` when not given.
+
+    Returns
+    -------
+    ndarray (F, J, 3) or None
+        None when the clip shows fewer than ``min_strides`` repeating strides
+        (too short, or not running): the caller falls back to a plain low-pass.
+    """
+    from scipy import sparse
+    from scipy.sparse.linalg import splu
+
+    kp = np.asarray(keypoints_px, float)
+    F, nj = kp.shape[:2]
+    if nj != 17 or F < 20:
+        return None
+    noise = noise_model(kp)[0] if noise_px is None else float(noise_px)
+    if not np.isfinite(noise) or noise <= 0:
+        return None
+    xy = kp[..., :2]
+    ok = np.all(np.isfinite(xy), -1)
+    trunk = np.nanmean(np.where(ok[:, _TRUNK, None], xy[:, _TRUNK], np.nan), axis=1)  # (F, 2)
+    if np.isfinite(trunk).all(1).sum() < F // 2:
+        return None
+    trunk = np.column_stack([fill_gaps(trunk[:, c], F) for c in range(2)])
+    ref = _lowpass_series(trunk, fps, 1.5)
+    # body scale: hip-to-neck and hip-to-shoulder distances, heavily smoothed
+    span = np.nanmean(np.stack([np.linalg.norm(xy[:, 9] - xy[:, 0], axis=-1),
+                                np.linalg.norm(xy[:, 11] - xy[:, 4], axis=-1),
+                                np.linalg.norm(xy[:, 14] - xy[:, 1], axis=-1)], 1), axis=1)
+    span = fill_gaps(span, F)
+    if not np.isfinite(span).any() or np.nanmedian(span) <= 0:
+        return None
+    span = np.where(np.isfinite(span), span, np.nanmedian(span))
+    scale = butterworth(median_filter(span, size=int(fps) | 1, mode="nearest"), fps, 0.5)
+    rel = (xy - ref[:, None]) / scale[:, None, None]
+    T0 = stride_period_frames(rel, fps)
+    if not np.isfinite(T0) or F < min_strides * T0:
+        return None
+    lag = _local_lags(rel.reshape(F, -1), T0)
+    sn = noise / scale  # noise sd per frame in relative units
+    t = np.arange(F)
+    has = np.isfinite(lag) & (t + np.nan_to_num(lag) + 1 < F)
+    pos = t[has] + lag[has]
+    k = np.floor(pos).astype(int)
+    a = pos - k
+    m = int(has.sum())
+    rows = np.arange(m)
+    # coupling operator R: (R x)_i = x_t - (1 - a) x_k - a x_{k+1}
+    R = sparse.csr_matrix((np.concatenate([np.ones(m), -(1 - a), -a]),
+                           (np.concatenate([rows, rows, rows]), np.concatenate([t[has], k, k + 1]))),
+                          shape=(m, F))
+    D2 = sparse.diags([np.ones(F - 2), -2 * np.ones(F - 2), np.ones(F - 2)], [0, 1, 2], shape=(F - 2, F))
+    wc = 2 * np.pi * smooth_cutoff_hz / fps
+    lam_s = 1.0 / (2 - 2 * np.cos(min(wc, np.pi))) ** 2  # relative to the data weight
+    P2 = lam_s * (D2.T @ D2)
+    out = kp.copy()
+    for j in range(17):
+        y = rel[:, j]
+        okj = ok[:, j]
+        if okj.sum() < F // 2:
+            continue
+        # speed (relative units per frame) from a light low-pass, for the timing term
+        yl = _lowpass_series(np.where(okj[:, None], y, np.nan), fps, 8.0)
+        yl = np.column_stack([np.interp(t, t[okj], yl[okj, c]) for c in range(2)])
+        vel = np.linalg.norm(np.gradient(yl, axis=0), axis=-1)
+        # the joint's stride-to-stride variability from its repeat differences
+        yi = np.column_stack([np.interp(t, t[okj], y[okj, c]) for c in range(2)])
+        timing = (vel[has] * lag_sd_frames) ** 2 / 2  # per coordinate
+        rep = R @ yi  # per coordinate: var = 2 s_v^2 + 2 s_n^2 + timing
+        sel = okj[has]
+        sn2_all = sn**2
+        sv2 = float(np.mean(np.sum(rep[sel] ** 2, -1) / 2 - timing[sel] - 2 * sn2_all[has][sel])) / 2
+        sv2 = max(sv2, 0.05 * float(np.median(sn2_all)))
+        cvar = 2 * sv2 + timing
+        w = np.where(okj, 1.0 / sn2_all, 0.0)
+        A = sparse.diags(w) + R.T @ sparse.diags(1.0 / cvar) @ R + P2.multiply(np.mean(1.0 / sn2_all))
+        lu = splu(A.tocsc())
+        for c in range(2):
+            rhs = w * np.where(okj, y[:, c], 0.0)
+            out[:, j, c] = lu.solve(rhs) * scale + ref[:, c]
+        out[~okj, j] = np.nan
     return out

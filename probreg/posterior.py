@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .filtering import clean_keypoints
+from .filtering import clean_keypoints, noise_model
 from .kinematics import gait_summary
 from .lifting import CameraArrays, LiftConfig, estimate_segments, lift
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
@@ -88,36 +88,6 @@ def angle_bands(angles_point, angles_noisy, lo=5.0, hi=95.0, inflation=None):
 SEGMENTS = ("thigh", "shank", "upper_arm", "forearm", "trunk", "hip_width", "shoulder_width")
 OBSERVED_SEGMENTS = ("thigh", "shank", "upper_arm", "forearm", "trunk")
 PARAM_NAMES = ["log_height", "stature"] + [f"m_{s}" for s in SEGMENTS]
-
-
-def noise_model(keypoints_px, joints=(0, 7, 8)):
-    """Detector noise of a clip: per-coordinate sd (px) and frame-to-frame correlation.
-
-    Uses the trunk joints relative to the pelvis (camera motion cancels, the
-    trunk's own motion over a few frames is small).  For AR(1) noise with sd
-    ``s`` and lag-1 correlation ``r``, differences over ``k`` frames have
-    variance ``2 s^2 (1 - r^k)`` (doubled again for the difference of two
-    joints); lags 1 and 2 give ``r = v2 / v1 - 1`` and then ``s``.  Robust
-    (MAD) variances keep detector outliers out.
-
-    Returns
-    -------
-    sd_px : float
-    rho : float
-    """
-    kp = np.asarray(keypoints_px, float)[:, list(joints), :2]
-    rel = kp[:, 1:] - kp[:, :1]
-
-    def robust_var(k):
-        d = rel[k:] - rel[:-k]
-        d = d[np.isfinite(d)]
-        return (1.4826 * np.median(np.abs(d))) ** 2 / 2 if len(d) >= 20 else np.nan
-
-    v1, v2 = robust_var(1), robust_var(2)
-    if not (np.isfinite(v1) and np.isfinite(v2)) or v1 <= 0:
-        return float("nan"), 0.0
-    rho = float(np.clip(v2 / v1 - 1.0, 0.0, 0.9))
-    return float(np.sqrt(v1 / (2 * (1 - rho)))), rho
 
 
 @dataclass(frozen=True)

@@ -164,6 +164,16 @@ class GaitParams:
     pelvis_yaw_deg: float = 5.0
     heel_rise_deg: float = 40.0
     lateral_drift_m: float = 0.05
+    # stride-to-stride variability (applied when the simulation has an rng).  Knee/hip values
+    # measured on the CMU running mocap in shared/data (difference of the angle curve one
+    # stride apart, /sqrt 2: knee 2.0 deg, hip 1.5 deg; extra offset between strides ~2 deg,
+    # deviations decorrelate within ~0.1 s); stride-time CV of about 2 % is typical of
+    # healthy runners (e.g. Jordan, Challis & Newell 2006; Meardon et al. 2011).
+    stride_var_knee_deg: float = 2.0
+    stride_var_thigh_deg: float = 1.5
+    stride_var_slow_deg: float = 1.5
+    stride_var_arm_deg: float = 2.0
+    step_time_cv: float = 0.02
 
     def __post_init__(self):
         if not (0 < self.speed_mps <= 12):
@@ -326,6 +336,46 @@ def _heel_rise(stance_fraction, g, a):
     return d + r * np.cos(phi0 - rho), r * np.sin(phi0 - rho) - h
 
 
+def _smooth_noise(rng, times, sd, length_s):
+    """A stationary Gaussian process (squared-exponential kernel) sampled at ``times``."""
+    if rng is None or sd <= 0:
+        return np.zeros(len(times))
+    dt = min(0.005, length_s / 4)
+    grid = np.arange(times[0] - 4 * length_s, times[-1] + 4 * length_s + dt, dt)
+    # convolving white noise with a Gaussian of width l / sqrt(2) gives an SE kernel of length l
+    w = length_s / np.sqrt(2)
+    k = np.exp(-0.5 * (np.arange(-4 * w, 4 * w + dt, dt) / w) ** 2)
+    k /= np.sqrt(np.sum(k**2))
+    x = np.convolve(rng.standard_normal(len(grid)), k, mode="same")
+    return sd * np.interp(times, grid, x)
+
+
+def _deviations(rng, t0, t1, g):
+    """Per-leg stride-to-stride deviations (rad) of thigh and knee and of the arm swing and
+    elbow, as functions of time: a fast part (decorrelates within ~0.1 s) and a slow one."""
+    times = np.arange(t0, t1 + 0.01, 0.005)
+    out = {}
+    for side in (0, 1):
+        for name, sd in (("thigh", g.stride_var_thigh_deg), ("knee", g.stride_var_knee_deg),
+                         ("arm", g.stride_var_arm_deg), ("elbow", g.stride_var_arm_deg)):
+            out[name, side, "fast"] = np.radians(_smooth_noise(rng, times, sd, 0.06))
+            out[name, side, "slow"] = np.radians(_smooth_noise(rng, times, g.stride_var_slow_deg, 0.5))
+
+    def dev(t, name, side, phase=None, beta=None):
+        d = np.interp(t, times, out[name, side, "fast"] + out[name, side, "slow"])
+        if phase is not None:
+            # touchdown and toe-off follow the template (the pelvis's ballistic flight is
+            # fixed by them): deviations fade in and out around both events, so that the
+            # swing foot clears the ground and the stance foot stays put
+            p = np.mod(phase, 1.0)
+            dist = np.minimum(np.minimum(p, 1.0 - p), np.abs(p - beta))
+            x = np.clip(dist / 0.1, 0.0, 1.0)
+            d = d * x * x * (3 - 2 * x)
+        return d
+
+    return dev
+
+
 def simulate_runner(anthropometry, gait, n_frames, fps=50.0, rng=None, start_x_m=0.0,
                     lane_y_m=-3.05, start_phase=0.0):
     """Simulate a runner on the straight, running in ``+x`` along ``y = lane_y_m``.
@@ -337,7 +387,9 @@ def simulate_runner(anthropometry, gait, n_frames, fps=50.0, rng=None, start_x_m
     n_frames : int
     fps : float
     rng : numpy.random.Generator, optional
-        Drives the small lateral drift; none without it.
+        Drives the lateral drift and the stride-to-stride variability (step times and
+        joint-angle deviations, see :class:`GaitParams`); none without it (every stride
+        is then identical).
     start_x_m, lane_y_m : float
         Pelvis position at the first frame (x) and the line of travel (y).
     start_phase : float
@@ -379,13 +431,33 @@ def simulate_runner(anthropometry, gait, n_frames, fps=50.0, rng=None, start_x_m
 
     times = np.arange(int(n_frames)) / fps
     t_first = -(start_phase % 1.0) * stride_s - stride_s  # a right touchdown before the clip
-    n_steps = int(np.ceil((times[-1] - t_first) / step_s)) + 2
+    n_steps = int(np.ceil((times[-1] - t_first) / (0.9 * step_s))) + 3
     drift_knots = np.cumsum((rng.standard_normal(n_steps) if rng is not None else np.zeros(n_steps))
                             * g.lateral_drift_m / 3)
     drift_knots -= drift_knots[min(2, n_steps - 1)]
+    # touchdown times: step durations vary from step to step (contact time in proportion)
+    cv = g.step_time_cv if rng is not None else 0.0
+    steps = step_s * np.clip(1.0 + cv * (rng.standard_normal(n_steps) if rng is not None
+                                         else np.zeros(n_steps)), 0.8, 1.2)
+    t_tds = t_first + np.concatenate([[0.0], np.cumsum(steps)])  # n_steps + 1 touchdowns
+    dev = _deviations(rng, t_first, t_tds[-1], g) if rng is not None else None
+    knots_t = [t_tds[0::2], t_tds[1::2]]  # right touchdowns (phase 0, 1, ...), left ones
 
-    def phase_of(t, side):  # side 0 = right, 1 = left
-        return (t - t_first) / stride_s - 0.5 * side
+    def phase_of(t, side):  # side 0 = right, 1 = left; piecewise linear between touchdowns
+        kt = knots_t[side]
+        ph = np.arange(len(kt), dtype=float)
+        t = np.asarray(t, float)
+        before = ph[0] + (t - kt[0]) / stride_s
+        after = ph[-1] + (t - kt[-1]) / stride_s
+        return np.where(t < kt[0], before, np.where(t > kt[-1], after, np.interp(t, kt, ph)))
+
+    def leg_angles(t, side):
+        ph = phase_of(t, side)
+        th, kn = curves.angles_rad(ph)
+        if dev is not None:
+            th = th + dev(t, "thigh", side, ph, curves.beta)
+            kn = np.maximum(kn + dev(t, "knee", side, ph, curves.beta), np.radians(1.0))
+        return th, kn
 
     def hip_offset(t, side):
         # pelvic yaw: the hip of the swinging leg comes forward (Novacheck 1998)
@@ -393,44 +465,45 @@ def simulate_runner(anthropometry, gait, n_frames, fps=50.0, rng=None, start_x_m
         lateral = (-0.5 if side == 0 else 0.5) * a.hip_width_m
         return np.stack([-lateral * np.sin(psi), lateral * np.cos(psi)], -1)  # (x, y)
 
-    def leg_height(phase):
-        return -_leg_rel(*curves.angles_rad(phase), a)[1]
+    def leg_height(t, side):
+        return -_leg_rel(*leg_angles(t, side), a)[1]
 
     pelvis = np.full((len(times), 3), np.nan)
     stance_side = np.full(len(times), -1)
     balls = np.full((len(times), 2, 3), np.nan)  # ball of the stance foot, [right, left]
     touchdowns = []
     # pelvis at the first touchdown
-    td_height = a.ankle_height_m + leg_height(0.0)
-    p_td = np.array([start_x_m - g.speed_mps * (0 - t_first), lane_y_m, td_height])
+    p_td = np.array([start_x_m - g.speed_mps * (0 - t_first), lane_y_m,
+                     a.ankle_height_m + leg_height(t_tds[0], 0)])
     for k in range(n_steps):
         side = k % 2
-        t_td = t_first + k * step_s
-        t_to, t_next = t_td + tc, t_td + step_s
+        t_td, t_next = t_tds[k], t_tds[k + 1]
+        tc_k = tc * (t_next - t_td) / step_s
+        t_to = t_td + tc_k
         off = hip_offset(t_td, side)
-        fwd, _ = _leg_rel(*curves.angles_rad(phase_of(t_td, side)), a)
+        fwd, _ = _leg_rel(*leg_angles(t_td, side), a)
         ankle = np.array([p_td[0] + off[0] + fwd, p_td[1] + off[1], a.ankle_height_m])
         touchdowns.append((t_td, "right" if side == 0 else "left", ankle))
         # stance: the pelvis is placed so that the ankle stays put
         sel = (times >= t_td) & (times < t_to)
         if np.any(sel):
             ts = times[sel]
-            f, u = _leg_rel(*curves.angles_rad(phase_of(ts, side)), a)
+            f, u = _leg_rel(*leg_angles(ts, side), a)
             o = hip_offset(ts, side)
-            hx, hz = _heel_rise((ts - t_td) / tc, g, a)
+            hx, hz = _heel_rise((ts - t_td) / tc_k, g, a)
             pelvis[sel] = np.stack([ankle[0] + hx - f - o[:, 0], ankle[1] - o[:, 1],
                                     a.ankle_height_m + hz - u], -1)
             balls[sel, side] = ankle + [a.ankle_to_ball_m, 0.0, -a.ankle_height_m]
             stance_side[sel] = side
         # pelvis at toe-off
-        f, u = _leg_rel(*curves.angles_rad(phase_of(t_to, side)), a)
+        f, u = _leg_rel(*leg_angles(t_to, side), a)
         o = hip_offset(t_to, side)
         hx, hz = _heel_rise(1.0, g, a)
         p_to = np.array([ankle[0] + hx - f - o[0], ankle[1] - o[1], a.ankle_height_m + hz - u])
         # flight: ballistic in z, constant velocity in x, linear drift in y
         t_fl = t_next - t_to
         p_next = np.array([p_to[0] + v_flight * t_fl, lane_y_m + drift_knots[min(k + 1, n_steps - 1)],
-                           td_height])
+                           a.ankle_height_m + leg_height(t_next, 1 - side)])
         vz0 = (p_next[2] - p_to[2] + 0.5 * G_MPS2 * t_fl**2) / t_fl
         sel = (times >= t_to) & (times < t_next)
         if np.any(sel):
@@ -446,21 +519,21 @@ def simulate_runner(anthropometry, gait, n_frames, fps=50.0, rng=None, start_x_m
     for side, prefix in ((0, "r"), (1, "l")):
         o = hip_offset(times, side)
         hip = pelvis + np.concatenate([o, np.zeros((len(times), 1))], -1)
-        th, kn = curves.angles_rad(phase_of(times, side))
+        th, kn = leg_angles(times, side)
         knee = hip + np.stack([a.thigh_m * np.sin(th), np.zeros_like(th), -a.thigh_m * np.cos(th)], -1)
         ankle = knee + np.stack([a.shank_m * np.sin(th - kn), np.zeros_like(th),
                                  -a.shank_m * np.cos(th - kn)], -1)
         joints[:, J[f"{prefix}_hip"]] = hip
         joints[:, J[f"{prefix}_knee"]] = knee
         joints[:, J[f"{prefix}_ankle"]] = ankle
-    _upper_body(joints, times, phase_of, a, g)
+    _upper_body(joints, times, phase_of, a, g, dev)
     contacts = np.stack([stance_side == 1, stance_side == 0], -1)
     return RunnerMotion(joints_track_m=joints, contacts=contacts, times_s=times,
                         anthropometry=a, gait=g, touchdowns=touchdowns,
                         contact_points_track_m=balls[:, ::-1])
 
 
-def _upper_body(joints, times, phase_of, a, g):
+def _upper_body(joints, times, phase_of, a, g, dev=None):
     J = JOINT_INDEX
     pelvis = joints[:, J["pelvis"]]
     phr = phase_of(times, 0)
@@ -483,6 +556,9 @@ def _upper_body(joints, times, phase_of, a, g):
         # the arm is forward when the same-side thigh is back (around toe-off)
         alpha = np.radians(g.arm_mean_deg + g.arm_swing_deg * np.cos(2 * np.pi * (ph - 0.45)))
         elbow_flex = np.radians(g.elbow_deg + g.elbow_swing_deg * np.cos(2 * np.pi * (ph - 0.45)))
+        if dev is not None:
+            alpha = alpha + dev(times, "arm", side)
+            elbow_flex = elbow_flex + dev(times, "elbow", side)
         cross = np.radians(g.arm_cross_deg) * (0.5 + 0.5 * np.cos(2 * np.pi * (ph - 0.45)))
         inward = -sign * left_dir  # towards the body midline
         upper = -up * np.cos(alpha)[:, None] + ahead * np.sin(alpha)[:, None]

@@ -46,8 +46,24 @@ def test_speed_and_cadence(motion):
     pel = motion.joints_track_m[:, 0]
     speed = (pel[-1, 0] - pel[0, 0]) / (motion.times_s[-1] - motion.times_s[0])
     assert abs(speed - g.speed_mps) / g.speed_mps < 0.05
-    td = sorted(t for t, _, _ in motion.touchdowns)
-    assert np.allclose(np.diff(td), 1 / g.step_freq_hz)
+    steps = np.diff(sorted(t for t, _, _ in motion.touchdowns))
+    assert abs(np.mean(steps) * g.step_freq_hz - 1) < 0.02
+    # stride-to-stride variability: step times vary by about step_time_cv
+    assert 0.3 * g.step_time_cv < np.std(steps) * g.step_freq_hz < 2.5 * g.step_time_cv
+
+
+def test_strides_vary_with_rng_and_repeat_without():
+    a = Anthropometry.from_stature(1.75)
+    g = gait_for_style("run")
+    fps = 20 * g.step_freq_hz  # a stride is exactly 40 frames
+    fixed = simulate_runner(a, g, 400, fps)
+    assert np.allclose(np.diff(sorted(t for t, _, _ in fixed.touchdowns)), 1 / g.step_freq_hz)
+    knee = joint_angles(fixed.joints_track_m)["knee_r"]
+    assert np.max(np.abs(knee[40:] - knee[:-40])) < 1e-6
+    varied = simulate_runner(a, g, 400, fps, rng=np.random.default_rng(5))
+    knee = joint_angles(varied.joints_track_m)["knee_r"]
+    sd = np.std(knee[40:] - knee[:-40]) / np.sqrt(2)
+    assert 1.0 < sd < 8.0  # deg: a few degrees from stride to stride, as in real running
 
 
 def test_angles_physiological(motion):

@@ -52,6 +52,10 @@ def suite_dir(args, name="bench", images=True, n_frames=None):
     return Path(tmp.name), tmp
 
 
+#: VP distance from the image centre (focal lengths) beyond which a view counts as square-on
+SQUARE_ON_F = 1.0 / np.tan(np.radians(3.0))
+
+
 def _true_line(cam, index):
     P = cam.projection_matrix
     y = float(lane_line_y(index))
@@ -81,6 +85,10 @@ def frame_metrics(fl, cam_true, cam_est=None, athlete_xy=None):
     if abs(vt[2]) > 1e-12 and abs(v[2]) > 1e-12:
         vt2, ve2 = vt[:2] / vt[2], v[:2] / v[2]
         out["vp_pct"] = float(100 * np.linalg.norm(ve2 - vt2) / np.linalg.norm(vt2 - c))
+        # where the view is within 3 deg of square-on (VP beyond cot 3 deg = 19 focal lengths
+        # from the centre) the relative measure diverges; scored separately below
+        if np.linalg.norm(vt2 - c) <= SQUARE_ON_F * cam_true.focal_px:
+            out["vp_pct_oblique"] = out["vp_pct"]
     if cam_est is not None:
         out["fov_deg"] = abs(cam_est.fov_deg - cam_true.fov_deg)
         d = cam_est.C - cam_true.C
@@ -241,6 +249,7 @@ def run(args=None):
         table = []
         for key, label, unit in (("lane_line_px", "lane-line error", "px"),
                                  ("vp_pct", "vanishing-point error", "%"),
+                                 ("vp_pct_oblique", "vanishing-point error, views >= 3 deg from square-on", "%"),
                                  ("vp_deg", "vanishing-point direction error", "deg"),
                                  ("fov_deg", "FOV error (true height)", "deg"),
                                  ("loc_m", "camera location error (true height)", "m"),
@@ -252,7 +261,14 @@ def run(args=None):
             rep.numbers[key] = {"mean": mean, "sd": sd, "median": med}
         rep.sections.insert(1, "## Summary (all frames of the 14-clip suite)\n\n" + md_table(
             ["metric", "unit", "probreg mean +- sd", "median", "seed paper"], table) +
-            "\nTargets: VP <= 0.5 %, FOV <= 0.3 deg, location <= 1 % of the distance.\n")
+            "\nTargets: VP <= 0.5 %, FOV <= 0.3 deg, location <= 1 % of the distance.\n\n"
+            f"The paper's relative VP measure divides by the distance of the true VP from the image "
+            f"centre, which grows without bound as the camera turns square-on to the straight (the "
+            f"following camera passes that point in several clips); there a 0.01 deg direction error "
+            f"gives hundreds of per cent.  The second VP row leaves out the "
+            f"{len(allm.get('vp_pct', [])) - len(allm.get('vp_pct_oblique', []))} of "
+            f"{len(allm.get('vp_pct', []))} frames within 3 deg of square-on; the direction error (deg) "
+            f"is defined for every frame.\n")
         data = find_shared_data(getattr(args, "shared", None))
         if data is not None and (data / "paper_frames").is_dir():
             reports = Path(getattr(args, "reports", None) or "reports")
