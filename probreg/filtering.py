@@ -170,7 +170,7 @@ def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=
         out[filled, j, 2] = 0.5
         out[~np.isfinite(out[:, j, 0]), j] = np.nan
     if periodic:
-        sm = periodic_smooth(pre, fps, noise_px=noise)
+        sm = periodic_smooth(pre, fps)
         if sm is not None:  # else: clip without repeating strides, keep the low-pass
             ok = np.isfinite(out[..., 0]) & np.all(np.isfinite(sm[..., :2]), -1)
             out[..., :2] = np.where(ok[..., None], sm[..., :2], out[..., :2])
@@ -252,8 +252,8 @@ def _local_lags(y, T0, half_window=6, search=3.0, step=0.1):
     return lag
 
 
-def periodic_smooth(keypoints_px, fps, noise_px=None, smooth_cutoff_hz=9.0, lag_sd_frames=0.35,
-                    min_strides=2.0):
+def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cutoff_hz=7.0,
+                    lag_sd_frames=0.35, min_strides=2.0):
     """Cross-stride smoothing of keypoint tracks: running repeats itself, noise does not.
 
     A runner's stride repeats with small stride-to-stride changes, while
@@ -281,8 +281,10 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, smooth_cutoff_hz=9.0, lag_
         Gap-filled keypoints (NaN = missing; missing frames are filled by the
         prior and set back to NaN).
     fps : float
-    noise_px : float, optional
-        Detection noise (px); estimated with :func:`noise_model` when not given.
+    noise_px, noise_rho : float, optional
+        Detection noise (px) and its frame-to-frame correlation (AR(1)); estimated
+        with :func:`noise_model` when not given.  The data term uses the AR(1)
+        precision, so correlated noise is not mistaken for motion.
 
     Returns
     -------
@@ -297,7 +299,9 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, smooth_cutoff_hz=9.0, lag_
     F, nj = kp.shape[:2]
     if nj != 17 or F < 20:
         return None
-    noise = noise_model(kp)[0] if noise_px is None else float(noise_px)
+    est_sd, est_rho = noise_model(kp) if noise_px is None or noise_rho is None else (noise_px, noise_rho)
+    noise = float(est_sd if noise_px is None else noise_px)
+    rho = float(np.clip(est_rho if noise_rho is None else noise_rho, 0.0, 0.9))
     if not np.isfinite(noise) or noise <= 0:
         return None
     xy = kp[..., :2]
@@ -337,6 +341,10 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, smooth_cutoff_hz=9.0, lag_
     wc = 2 * np.pi * smooth_cutoff_hz / fps
     lam_s = 1.0 / (2 - 2 * np.cos(min(wc, np.pi))) ** 2  # relative to the data weight
     P2 = lam_s * (D2.T @ D2)
+    # precision of unit-variance AR(1) noise: tridiag(-rho, 1 + rho^2, -rho) / (1 - rho^2)
+    diag = np.full(F, 1 + rho**2)
+    diag[[0, -1]] = 1.0
+    Q = sparse.diags([diag, np.full(F - 1, -rho), np.full(F - 1, -rho)], [0, 1, -1]) / (1 - rho**2)
     out = kp.copy()
     for j in range(17):
         y = rel[:, j]
@@ -356,11 +364,13 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, smooth_cutoff_hz=9.0, lag_
         sv2 = float(np.mean(np.sum(rep[sel] ** 2, -1) / 2 - timing[sel] - 2 * sn2_all[has][sel])) / 2
         sv2 = max(sv2, 0.05 * float(np.median(sn2_all)))
         cvar = 2 * sv2 + timing
-        w = np.where(okj, 1.0 / sn2_all, 0.0)
-        A = sparse.diags(w) + R.T @ sparse.diags(1.0 / cvar) @ R + P2.multiply(np.mean(1.0 / sn2_all))
+        # data term with the AR(1) noise precision (tridiagonal), missing frames left out
+        sq = np.where(okj, 1.0 / np.sqrt(sn2_all), 0.0)
+        W = sparse.diags(sq) @ Q @ sparse.diags(sq)
+        A = W + R.T @ sparse.diags(1.0 / cvar) @ R + P2.multiply(np.mean(1.0 / sn2_all))
         lu = splu(A.tocsc())
         for c in range(2):
-            rhs = w * np.where(okj, y[:, c], 0.0)
+            rhs = W @ np.where(okj, y[:, c], 0.0)
             out[:, j, c] = lu.solve(rhs) * scale + ref[:, c]
         out[~okj, j] = np.nan
     return out
