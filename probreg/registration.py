@@ -163,7 +163,8 @@ class ClipRegistration:
     def track_offsets(self, seq, height_m):
         """Per-frame line-index offsets that give every physical line (``track_id``) one
         absolute index over the clip; frames that share no line with the previous ones fall
-        back to the camera's lateral position."""
+        back to the camera's lateral position, which also overrides the identities when they
+        would make the (static) camera jump sideways by a whole lane from one frame to the next."""
         members = seq.members_at_height(height_m)
         offsets = np.zeros(len(members), int)
         known = {}  # track id -> absolute index
@@ -176,6 +177,12 @@ class ClipRegistration:
             common = [(kk, known[i]) for kk, i in zip(k, ids) if i is not None and i in known]
             if common:
                 off = int(np.median([a - kk for kk, a in common]))
+                if prev_y is not None:
+                    # the camera is static: its lateral position cannot jump by a lane between
+                    # frames, so such a jump means the followed line identities slipped
+                    geo = int(np.round((m.y_m - prev_y) / self.lane_width_m))
+                    if 1 <= abs(geo - off) <= 2 and abs(m.y_m - self.lane_width_m * geo - prev_y) < 0.3 * self.lane_width_m:
+                        off = geo
             elif prev_y is not None:
                 off = int(np.round((m.y_m - prev_y) / self.lane_width_m))
             else:
@@ -184,7 +191,11 @@ class ClipRegistration:
             for kk, i in zip(k, ids):
                 if i is not None:
                     known[i] = kk + off
-            prev_y = m.y_m - self.lane_width_m * off
+            y = m.y_m - self.lane_width_m * off
+            # the reference follows the (slowly drifting, at a wrong height) lateral position;
+            # a frame whose family is off by more than a third of a lane does not move it
+            if prev_y is None or abs(y - prev_y) < 0.3 * self.lane_width_m:
+                prev_y = y
         return offsets
 
     def orient(self, height_m, keypoints_px, branch="narrow"):
