@@ -77,3 +77,23 @@ def test_frames_without_lanes_get_a_status_not_a_crash(small_clip, tmp_path):
     assert [cal["frame_status"][i] for i in (5, 6, 7, 9)] == ["no_lines"] * 3 + ["bad_image"]
     cams = json.loads((out / "camera.json").read_text())["frames"]
     assert cams[5]["K"] is None and cams[0]["K"] is not None
+
+
+def test_slipped_line_identities_are_repaired(small_clip):
+    """Followed lines that swap identities with their neighbours half-way through a clip must
+    not move the static camera sideways by a lane."""
+    from dataclasses import replace
+
+    clip = load_clip(small_clip)
+    gt = load_groundtruth(small_clip)
+    reg = register_clip(clip)
+    h = gt.cameras[0].C[2]
+    ref = [ln.track_id for ln in sorted(reg.frame_lanes[19].lines, key=lambda ln: ln.index)]
+    slip = {a: b for a, b in zip(ref, ref[1:])}
+    for t in range(20, len(reg.frame_lanes)):
+        fl = reg.frame_lanes[t]
+        lines = tuple(replace(ln, track_id=slip.get(ln.track_id, 1000 + ln.track_id)) for ln in fl.lines)
+        reg.frame_lanes[t] = replace(fl, lines=lines)
+    cams, _ = reg.cameras(h, clip.keypoints_px, clip.athlete_lane, dist=gt.cameras[0].dist)
+    lateral = np.array([abs(c.C[1] - g.C[1]) for c, g in zip(cams, gt.cameras) if c is not None])
+    assert len(lateral) >= 36 and np.all(lateral < 0.3)
