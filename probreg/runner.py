@@ -164,13 +164,15 @@ class GaitParams:
     pelvis_yaw_deg: float = 5.0
     heel_rise_deg: float = 40.0
     lateral_drift_m: float = 0.05
-    # stride-to-stride variability (applied when the simulation has an rng).  Knee/hip values
-    # measured on the CMU running mocap in shared/data (difference of the angle curve one
-    # stride apart, /sqrt 2: knee 2.0 deg, hip 1.5 deg; extra offset between strides ~2 deg,
-    # deviations decorrelate within ~0.1 s); stride-time CV of about 2 % is typical of
-    # healthy runners (e.g. Jordan, Challis & Newell 2006; Meardon et al. 2011).
-    stride_var_knee_deg: float = 2.0
-    stride_var_thigh_deg: float = 1.5
+    # stride-to-stride variability (applied when the simulation has an rng), set so that the
+    # generated runner matches the CMU running mocap in shared/data on the same measure (sd of
+    # the angle curve one stride apart, / sqrt 2: knee 2.1 deg, hip 1.7 deg; deviations
+    # decorrelate within ~0.1 s; `probreg bench realism`, section c).  The amplitudes below are
+    # larger than those numbers because deviations fade out around touchdown and toe-off.
+    # Stride-time CV of about 2 % is typical of healthy runners (e.g. Jordan, Challis & Newell
+    # 2006; Meardon et al. 2011).
+    stride_var_knee_deg: float = 3.4
+    stride_var_thigh_deg: float = 2.6
     stride_var_slow_deg: float = 1.5
     stride_var_arm_deg: float = 2.0
     step_time_cv: float = 0.02
@@ -368,12 +370,34 @@ def _deviations(rng, t0, t1, g):
             # fixed by them): deviations fade in and out around both events, so that the
             # swing foot clears the ground and the stance foot stays put
             p = np.mod(phase, 1.0)
-            dist = np.minimum(np.minimum(p, 1.0 - p), np.abs(p - beta))
-            x = np.clip(dist / 0.1, 0.0, 1.0)
+            # (in phase units, scaled by the width of each fade: 0.1 after touchdown and
+            # around toe-off, 0.25 before touchdown, where the foot descends to the ground)
+            dist = np.minimum(np.minimum(p / 0.1, (1.0 - p) / 0.25), np.abs(p - beta) / 0.1)
+            x = np.clip(dist, 0.0, 1.0)
             d = d * x * x * (3 - 2 * x)
         return d
 
     return dev
+
+
+def _clearance_flexion(hip, thigh_rad, knee_rad, swing, a, floor_m=0.035):
+    """Extra swing-knee flexion (rad) that keeps the swing ankle at least ``floor_m`` above the
+    ground (the stride-to-stride deviations of the stance leg can lower the pelvis), smoothed
+    over time as a runner would flex the knee for toe clearance."""
+    extra = np.zeros(len(knee_rad))
+    steps = np.radians(np.arange(0.0, 40.5, 0.5))
+    z = hip[:, None, 2] - a.thigh_m * np.cos(thigh_rad)[:, None] \
+        - a.shank_m * np.cos(thigh_rad[:, None] - knee_rad[:, None] - steps[None])
+    low = swing & (z[:, 0] < floor_m)
+    if not low.any():
+        return extra
+    ok = z >= floor_m
+    first = np.where(ok.any(1), np.argmax(ok, 1), len(steps) - 1)
+    extra[low] = steps[first[low]]
+    from scipy.ndimage import gaussian_filter1d, maximum_filter1d
+
+    extra = gaussian_filter1d(maximum_filter1d(extra, 5), 1.0)
+    return np.where(swing, extra, 0.0)
 
 
 def simulate_runner(anthropometry, gait, n_frames, fps=50.0, rng=None, start_x_m=0.0,
@@ -520,6 +544,8 @@ def simulate_runner(anthropometry, gait, n_frames, fps=50.0, rng=None, start_x_m
         o = hip_offset(times, side)
         hip = pelvis + np.concatenate([o, np.zeros((len(times), 1))], -1)
         th, kn = leg_angles(times, side)
+        if dev is not None:
+            kn = kn + _clearance_flexion(hip, th, kn, stance_side != side, a)
         knee = hip + np.stack([a.thigh_m * np.sin(th), np.zeros_like(th), -a.thigh_m * np.cos(th)], -1)
         ankle = knee + np.stack([a.shank_m * np.sin(th - kn), np.zeros_like(th),
                                  -a.shank_m * np.cos(th - kn)], -1)
