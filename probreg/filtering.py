@@ -213,7 +213,7 @@ def stride_period_frames(rel, fps, min_s=0.45, max_s=1.6):
     # (for running, the step lag swaps left and right); drifting tracks grow with the lag
     if not (0 < i < len(lags) - 1 and d[i] < 0.5 * np.nanmax(d[:i])):
         return float("nan")
-    if 0 < i < len(lags) - 1 and np.all(np.isfinite(d[i - 1:i + 2])):
+    if np.all(np.isfinite(d[i - 1:i + 2])):
         den = d[i - 1] - 2 * d[i] + d[i + 1]
         off = 0.5 * (d[i - 1] - d[i + 1]) / den if den > 0 else 0.0
         return float(lags[i] + np.clip(off, -0.5, 0.5))
@@ -299,9 +299,12 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
     F, nj = kp.shape[:2]
     if nj != 17 or F < 20:
         return None
-    est_sd, est_rho = noise_model(kp) if noise_px is None or noise_rho is None else (noise_px, noise_rho)
-    noise = float(est_sd if noise_px is None else noise_px)
-    rho = float(np.clip(est_rho if noise_rho is None else noise_rho, 0.0, 0.9))
+    if noise_px is None or noise_rho is None:
+        est_sd, est_rho = noise_model(kp)
+        noise_px = est_sd if noise_px is None else noise_px
+        noise_rho = est_rho if noise_rho is None else noise_rho
+    noise = float(noise_px)
+    rho = float(np.clip(noise_rho, 0.0, 0.9))
     if not np.isfinite(noise) or noise <= 0:
         return None
     xy = kp[..., :2]
@@ -345,6 +348,8 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
     diag = np.full(F, 1 + rho**2)
     diag[[0, -1]] = 1.0
     Q = sparse.diags([diag, np.full(F - 1, -rho), np.full(F - 1, -rho)], [0, 1, -1]) / (1 - rho**2)
+    sn2_all = sn**2
+    P2 = P2.multiply(np.mean(1.0 / sn2_all))  # smoothness relative to the mean data weight
     out = kp.copy()
     for j in range(17):
         y = rel[:, j]
@@ -360,14 +365,13 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
         timing = (vel[has] * lag_sd_frames) ** 2 / 2  # per coordinate
         rep = R @ yi  # per coordinate: var = 2 s_v^2 + 2 s_n^2 + timing
         sel = okj[has]
-        sn2_all = sn**2
         sv2 = float(np.mean(np.sum(rep[sel] ** 2, -1) / 2 - timing[sel] - 2 * sn2_all[has][sel])) / 2
         sv2 = max(sv2, 0.05 * float(np.median(sn2_all)))
         cvar = 2 * sv2 + timing
         # data term with the AR(1) noise precision (tridiagonal), missing frames left out
         sq = np.where(okj, 1.0 / np.sqrt(sn2_all), 0.0)
         W = sparse.diags(sq) @ Q @ sparse.diags(sq)
-        A = W + R.T @ sparse.diags(1.0 / cvar) @ R + P2.multiply(np.mean(1.0 / sn2_all))
+        A = W + R.T @ sparse.diags(1.0 / cvar) @ R + P2
         lu = splu(A.tocsc())
         for c in range(2):
             rhs = W @ np.where(okj, y[:, c], 0.0)

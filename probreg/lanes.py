@@ -200,14 +200,18 @@ def _normalise_line(l):
     return l / np.hypot(l[0], l[1])
 
 
-def _line_from_moments(n, sx, sy, sxx, syy, sxy):
-    """Total least-squares line from the point moments (count, sums, sums of products)."""
-    mx, my = sx / n, sy / n
-    cxx, cyy, cxy = sxx - n * mx * mx, syy - n * my * my, sxy - n * mx * my
-    # direction of largest spread of the 2x2 scatter matrix, closed form
+def _tls_line(mx, my, cxx, cyy, cxy):
+    """Unit-normal line through the centroid ``(mx, my)`` along the direction of largest
+    spread of the centred scatter matrix ``[[cxx, cxy], [cxy, cyy]]`` (closed form)."""
     ang = 0.5 * np.arctan2(2 * cxy, cxx - cyy)
     nx, ny = -np.sin(ang), np.cos(ang)
     return np.array([nx, ny, -(nx * mx + ny * my)])
+
+
+def _line_from_moments(n, sx, sy, sxx, syy, sxy):
+    """Total least-squares line from the point moments (count, sums, sums of products)."""
+    mx, my = sx / n, sy / n
+    return _tls_line(mx, my, sxx - n * mx * mx, syy - n * my * my, sxy - n * mx * my)
 
 
 def _moments(points):
@@ -219,10 +223,7 @@ def _fit_line(points):
     """Total least-squares line through points (N, 2): unit-normal homogeneous line."""
     m = np.add.reduce(points, 0) / len(points)
     d = points - m
-    sxx, syy, sxy = d[:, 0] @ d[:, 0], d[:, 1] @ d[:, 1], d[:, 0] @ d[:, 1]
-    ang = 0.5 * np.arctan2(2 * sxy, sxx - syy)
-    n = np.array([-np.sin(ang), np.cos(ang)])
-    return np.array([n[0], n[1], -n @ m])
+    return _tls_line(m[0], m[1], d[:, 0] @ d[:, 0], d[:, 1] @ d[:, 1], d[:, 0] @ d[:, 1])
 
 
 def _white_response(gray_min, tophat_px):
@@ -342,11 +343,6 @@ def _measure_lines(image_bgr, endpoint_sets, cfg):
     for sl_pts, sl_ok in zip(np.split(centre, np.cumsum(starts)[:-1]), np.split(valid, np.cumsum(starts)[:-1])):
         out.append(sl_pts[sl_ok] if sl_ok.sum() >= 4 else None)
     return out
-
-
-def _measure_line(image_bgr, endpoints, cfg):
-    """Sub-pixel centre points along one rough line (see :func:`_measure_lines`)."""
-    return _measure_lines(image_bgr, [endpoints], cfg)[0]
 
 
 def _median(x):
@@ -674,10 +670,10 @@ def detect_lanes(image_bgr, config: LaneDetectorConfig = LaneDetectorConfig(), f
 def _measure_candidates(image_bgr, endpoint_sets, config, distinct=False):
     """Sub-pixel measurement of rough lines (longest first); curved ones are counted, not kept.
 
-    ``distinct=True`` (lines known to be different, e.g. followed from the previous frame)
-    measures all lines in one batch; otherwise a cluster lying on an already measured line
-    is skipped as a duplicate.  Returns the candidates ``(line, points, length)`` and
-    ``(number, total length)`` of curved ones.
+    All lines are measured in one batch.  With ``distinct=False`` a cluster lying on an
+    already measured line is dropped as a duplicate; ``distinct=True`` (lines known to be
+    different, e.g. followed from the previous frame) keeps every one.  Returns the
+    candidates ``(line, points, length)`` and ``(number, total length)`` of curved ones.
     """
     candidates, measured = [], []
     n_curved, curved_length = 0, 0.0

@@ -30,6 +30,7 @@ from dataclasses import asdict, dataclass, field, replace
 
 import numpy as np
 from scipy.interpolate import PchipInterpolator
+from scipy.ndimage import gaussian_filter1d, maximum_filter1d
 
 from .skeleton import JOINT_INDEX
 
@@ -340,7 +341,7 @@ def _heel_rise(stance_fraction, g, a):
 
 def _smooth_noise(rng, times, sd, length_s):
     """A stationary Gaussian process (squared-exponential kernel) sampled at ``times``."""
-    if rng is None or sd <= 0:
+    if sd <= 0:
         return np.zeros(len(times))
     dt = min(0.005, length_s / 4)
     grid = np.arange(times[0] - 4 * length_s, times[-1] + 4 * length_s + dt, dt)
@@ -394,8 +395,6 @@ def _clearance_flexion(hip, thigh_rad, knee_rad, swing, a, floor_m=0.035):
     ok = z >= floor_m
     first = np.where(ok.any(1), np.argmax(ok, 1), len(steps) - 1)
     extra[low] = steps[first[low]]
-    from scipy.ndimage import gaussian_filter1d, maximum_filter1d
-
     extra = gaussian_filter1d(maximum_filter1d(extra, 5), 1.0)
     return np.where(swing, extra, 0.0)
 
@@ -460,9 +459,8 @@ def simulate_runner(anthropometry, gait, n_frames, fps=50.0, rng=None, start_x_m
                             * g.lateral_drift_m / 3)
     drift_knots -= drift_knots[min(2, n_steps - 1)]
     # touchdown times: step durations vary from step to step (contact time in proportion)
-    cv = g.step_time_cv if rng is not None else 0.0
-    steps = step_s * np.clip(1.0 + cv * (rng.standard_normal(n_steps) if rng is not None
-                                         else np.zeros(n_steps)), 0.8, 1.2)
+    jitter = rng.standard_normal(n_steps) if rng is not None else np.zeros(n_steps)
+    steps = step_s * np.clip(1.0 + g.step_time_cv * jitter, 0.8, 1.2)
     t_tds = t_first + np.concatenate([[0.0], np.cumsum(steps)])  # n_steps + 1 touchdowns
     dev = _deviations(rng, t_first, t_tds[-1], g) if rng is not None else None
     knots_t = [t_tds[0::2], t_tds[1::2]]  # right touchdowns (phase 0, 1, ...), left ones
