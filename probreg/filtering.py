@@ -15,7 +15,7 @@ from scipy.ndimage import median_filter
 from scipy.signal import butter, filtfilt
 
 __all__ = ["hampel", "fill_gaps", "butterworth", "clean_keypoints", "keypoint_noise_px", "noise_model",
-           "periodic_smooth", "stride_period_frames"]
+           "periodic_smooth", "periodic_smooth_series", "stride_lags", "stride_period_frames"]
 
 
 def keypoint_noise_px(keypoints_px, joints=(0, 7, 8)):
@@ -41,34 +41,46 @@ def keypoint_noise_px(keypoints_px, joints=(0, 7, 8)):
     return float(1.4826 * np.median(np.abs(d2)) / np.sqrt(12))
 
 
-def noise_model(keypoints_px, joints=(0, 7, 8)):
+def noise_model(keypoints_px, joints=(0, 7, 8), lags=(1, 2, 3)):
     """Detector noise of a clip: per-coordinate sd (px) and frame-to-frame correlation.
 
     Uses the trunk joints relative to the pelvis (camera motion cancels, the
     trunk's own motion over a few frames is small).  For AR(1) noise with sd
     ``s`` and lag-1 correlation ``r``, differences over ``k`` frames have
     variance ``2 s^2 (1 - r^k)`` (doubled again for the difference of two
-    joints); lags 1 and 2 give ``r = v2 / v1 - 1`` and then ``s``.  Robust
-    (MAD) variances keep detector outliers out.
+    joints).  ``r`` and ``s`` are fitted to the robust (MAD) variances at
+    ``lags`` by least squares in log variance: two lags alone give a ratio
+    that 250 frames measure too loosely (``r`` then wanders towards 1 and
+    ``s`` with it).
 
     Returns
     -------
     sd_px : float
     rho : float
+
+    >>> rng = np.random.default_rng(1)
+    >>> e = np.zeros((4000, 17, 2)); w = rng.normal(0, 1, e.shape)
+    >>> for t in range(1, 4000): e[t] = 0.5 * e[t - 1] + np.sqrt(0.75) * w[t]
+    >>> sd, rho = noise_model(np.concatenate([3 * e, np.ones((4000, 17, 1))], -1))
+    >>> bool(abs(sd - 3) < 0.2 and abs(rho - 0.5) < 0.06)
+    True
     """
     kp = np.asarray(keypoints_px, float)[:, list(joints), :2]
     rel = kp[:, 1:] - kp[:, :1]
-
-    def robust_var(k):
+    v = []
+    for k in lags:
         d = rel[k:] - rel[:-k]
         d = d[np.isfinite(d)]
-        return (1.4826 * np.median(np.abs(d))) ** 2 / 2 if len(d) >= 20 else np.nan
-
-    v1, v2 = robust_var(1), robust_var(2)
-    if not (np.isfinite(v1) and np.isfinite(v2)) or v1 <= 0:
+        v.append((1.4826 * np.median(np.abs(d))) ** 2 / 2 if len(d) >= 20 else np.nan)
+    v = np.array(v)
+    if not np.all(np.isfinite(v)) or np.any(v <= 0):
         return float("nan"), 0.0
-    rho = float(np.clip(v2 / v1 - 1.0, 0.0, 0.9))
-    return float(np.sqrt(v1 / (2 * (1 - rho)))), rho
+    r = np.linspace(0.0, 0.9, 181)[:, None]
+    g = 2 * (1 - r ** np.asarray(lags)[None, :])  # (R, K): variance per unit s^2
+    log_s2 = np.mean(np.log(v)[None] - np.log(g), axis=1)
+    cost = np.sum((np.log(v)[None] - np.log(g) - log_s2[:, None]) ** 2, axis=1)
+    i = int(np.argmin(cost))
+    return float(np.exp(0.5 * log_s2[i])), float(r[i, 0])
 
 
 def hampel(x, half_window=4, n_sigma=3.0, min_scale=1.0):
@@ -154,7 +166,6 @@ def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=
     # outlier scale: a clean track's own curvature at turning points must not look like an outlier
     scale = max(1.0, 2.0 * noise) if np.isfinite(noise) else 1.0
     out = kp.copy()
-    pre = kp.copy()  # outlier-free and gap-filled, before any low-pass
     for j in range(kp.shape[1]):
         cols = []
         for c in range(2):
@@ -164,21 +175,25 @@ def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=
         bad = ~np.isfinite(cols[0]) | ~np.isfinite(cols[1])
         for c in range(2):
             x = fill_gaps(np.where(bad, np.nan, cols[c]), max_gap)
-            pre[:, j, c] = x
             out[:, j, c] = butterworth(x, fps, cutoff_hz) if cutoff_hz else x
         filled = np.isfinite(out[:, j, 0]) & ~np.isfinite(kp[:, j, 2])
         out[filled, j, 2] = 0.5
         out[~np.isfinite(out[:, j, 0]), j] = np.nan
     if periodic:
-        sm = periodic_smooth(pre, fps)
+        # raw detections: the smoother rejects outliers itself and fills short gaps
+        sm = periodic_smooth(kp, fps, fill_max_gap=max_gap)
         if sm is not None:  # else: clip without repeating strides, keep the low-pass
-            ok = np.isfinite(out[..., 0]) & np.all(np.isfinite(sm[..., :2]), -1)
-            out[..., :2] = np.where(ok[..., None], sm[..., :2], out[..., :2])
+            done = np.all(np.isfinite(kp[..., :2]), -1).sum(0) >= len(kp) // 2  # joints it took
+            use = done[None, :] & np.all(np.isfinite(sm[..., :2]), -1)
+            out[..., :2] = np.where(use[..., None], sm[..., :2], out[..., :2])
+            out[use & ~np.isfinite(kp[..., 2]), 2] = 0.5
+            out[done[None, :] & ~use] = np.nan
     return out
 
 
 # --------------------------------------------------------------------------- cross-stride smoothing
 #: Trunk joints (H36M order) whose smoothed mean is the reference point of the relative coordinates.
+
 _TRUNK = (0, 1, 4, 7, 8, 11, 14)
 
 
@@ -187,6 +202,60 @@ def _lowpass_series(x, fps, cutoff_hz):
     flat = x.reshape(len(x), -1)
     out = np.column_stack([butterworth(flat[:, k], fps, cutoff_hz) for k in range(flat.shape[1])])
     return out.reshape(x.shape)
+
+
+def _relative_tracks(kp, fps, noise):
+    """Keypoints relative to the slowly moving trunk, divided by a slowly varying body scale
+    (zoom does not read as a change of posture).
+
+    Returns ``(rel, ref, scale, rel_clean)`` -- ``rel_clean`` with outliers removed (NaN),
+    for timing estimates -- or None when the trunk or the body scale is not seen often enough.
+    """
+    F = len(kp)
+    xy = kp[..., :2]
+    ok = np.all(np.isfinite(xy), -1)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # frames without any trunk joint
+        trunk = np.nanmean(np.where(ok[:, _TRUNK, None], xy[:, _TRUNK], np.nan), axis=1)  # (F, 2)
+        # body scale: hip-to-neck and hip-to-shoulder distances, heavily smoothed
+        span = np.nanmean(np.stack([np.linalg.norm(xy[:, 9] - xy[:, 0], axis=-1),
+                                    np.linalg.norm(xy[:, 11] - xy[:, 4], axis=-1),
+                                    np.linalg.norm(xy[:, 14] - xy[:, 1], axis=-1)], 1), axis=1)
+    if np.isfinite(trunk).all(1).sum() < F // 2:
+        return None
+    trunk = np.column_stack([fill_gaps(trunk[:, c], F) for c in range(2)])
+    ref = _lowpass_series(trunk, fps, 1.5)
+    span = fill_gaps(span, F)
+    if not np.isfinite(span).any() or np.nanmedian(span) <= 0:
+        return None
+    span = np.where(np.isfinite(span), span, np.nanmedian(span))
+    scale = butterworth(median_filter(span, size=int(fps) | 1, mode="nearest"), fps, 0.5)
+    rel = (xy - ref[:, None]) / scale[:, None, None]
+    # the stride timing comes from outlier-free tracks (one wild detection would otherwise
+    # dominate the pattern match)
+    sn_med = float(np.median(noise / scale)) if np.isfinite(noise) else 0.0
+    rel_t = np.stack([[hampel(rel[:, j, c], 4, 3.0, min_scale=max(2 * sn_med, 1e-3)) for c in range(2)]
+                      for j in range(kp.shape[1])]).transpose(2, 0, 1)
+    return rel, ref, scale, rel_t
+
+
+def stride_lags(keypoints_px, fps, min_strides=2.0):
+    """Per-frame lag (frames, fractional) to the same phase one stride later, from the
+    whole-body 2D pattern; None when the clip shows fewer than ``min_strides`` repeating
+    strides.  Frames without a partner one stride later are NaN.
+    """
+    kp = np.asarray(keypoints_px, float)
+    F = len(kp)
+    if kp.ndim != 3 or kp.shape[1] != 17 or F < 20:
+        return None
+    tracks = _relative_tracks(kp, fps, noise_model(kp)[0])
+    if tracks is None:
+        return None
+    rel_t = tracks[3]
+    T0 = stride_period_frames(rel_t, fps)
+    if not np.isfinite(T0) or F < min_strides * T0:
+        return None
+    return _local_lags(rel_t.reshape(F, -1), T0)
 
 
 def stride_period_frames(rel, fps, min_s=0.45, max_s=1.6):
@@ -252,8 +321,124 @@ def _local_lags(y, T0, half_window=6, search=3.0, step=0.1):
     return lag
 
 
+def _coupling(lag):
+    """Sparse operator ``(R x)_i = x_t - x(t + lag_t)`` (linear interpolation) over the frames
+    with a partner one stride later; returns ``(R, has)``, ``has`` marking those frames."""
+    from scipy import sparse
+
+    F = len(lag)
+    t = np.arange(F)
+    has = np.isfinite(lag) & (t + np.nan_to_num(lag) + 1 < F)
+    pos = t[has] + lag[has]
+    k = np.floor(pos).astype(int)
+    a = pos - k
+    m = int(has.sum())
+    rows = np.arange(m)
+    R = sparse.csr_matrix((np.concatenate([np.ones(m), -(1 - a), -a]),
+                           (np.concatenate([rows, rows, rows]), np.concatenate([t[has], k, k + 1]))),
+                          shape=(m, F))
+    return R, has
+
+
+def _smoothness(F, fps, cutoff_hz):
+    """Second-difference penalty (relative to a unit data weight) with its half-power point at
+    ``cutoff_hz``."""
+    from scipy import sparse
+
+    D2 = sparse.diags([np.ones(F - 2), -2 * np.ones(F - 2), np.ones(F - 2)], [0, 1, 2], shape=(F - 2, F))
+    wc = 2 * np.pi * cutoff_hz / fps
+    return (D2.T @ D2) / (2 - 2 * np.cos(min(wc, np.pi))) ** 2
+
+
+def _ar1_precision(F, rho):
+    """Precision of unit-variance AR(1) noise: tridiag(-rho, 1 + rho^2, -rho) / (1 - rho^2)."""
+    from scipy import sparse
+
+    diag = np.full(F, 1 + rho**2)
+    diag[[0, -1]] = 1.0
+    return sparse.diags([diag, np.full(F - 1, -rho), np.full(F - 1, -rho)], [0, 1, -1]) / (1 - rho**2)
+
+
+def periodic_smooth_series(y, lag, fps, rho=0.5, smooth_cutoff_hz=14.0, lag_sd_frames=0.35,
+                           min_sv=0.5, iters=4):
+    """Cross-stride smoothing of one scalar series whose noise level is unknown.
+
+    The model of :func:`periodic_smooth` for a single series (e.g. a lifted knee
+    angle): ``y_t = x_t + e_t`` with AR(1) noise ``e`` of lag-1 correlation
+    ``rho`` and unknown sd ``s_n``; the prior couples ``x_t`` to the same phase one
+    stride later (variance ``2 s_v^2 + (v_t lag_sd)^2``) and penalises second
+    differences (half-power point ``smooth_cutoff_hz``).  ``s_n`` and the
+    stride-to-stride variability ``s_v`` are estimated alternately: ``s_n^2`` as
+    the residual's AR(1) quadratic form over its degrees of freedom
+    (``n - tr(S)``, S the smoother's hat matrix), ``s_v^2`` from the repeat
+    differences of the data minus the noise's share (floored at ``min_sv``).
+
+    Parameters
+    ----------
+    y : ndarray (F,)
+        NaN = missing (filled by the model).
+    lag : ndarray (F,)
+        From :func:`stride_lags`.
+
+    Returns
+    -------
+    x : ndarray (F,)
+    info : dict
+        ``noise_sd``, ``stride_sd``.
+
+    >>> rng = np.random.default_rng(3)
+    >>> t = np.arange(300); truth = 40 + 35 * np.sin(2 * np.pi * t / 34.0)
+    >>> y = truth + rng.normal(0, 5, 300)
+    >>> x, info = periodic_smooth_series(y, np.full(300, 34.0), 50.0, rho=0.0)
+    >>> bool(np.mean(np.abs(x - truth)) < 0.5 * np.mean(np.abs(y - truth)))
+    True
+    >>> bool(abs(info["noise_sd"] - 5) < 1)
+    True
+    """
+    from scipy import sparse
+    from scipy.sparse.linalg import splu
+
+    y = np.asarray(y, float)
+    F = len(y)
+    ok = np.isfinite(y)
+    if ok.sum() < 10 or lag is None:
+        return y.copy(), {"noise_sd": float("nan"), "stride_sd": float("nan")}
+    t = np.arange(F)
+    R, has = _coupling(np.asarray(lag, float))
+    P2 = _smoothness(F, fps, smooth_cutoff_hz)
+    mask = sparse.diags(ok.astype(float))
+    Qm = (mask @ _ar1_precision(F, float(np.clip(rho, 0.0, 0.9))) @ mask).tocsc()
+    Qd = Qm.toarray()
+    yi = np.interp(t, t[ok], y[ok])
+    y0 = np.where(ok, y, 0.0)
+    rep = R @ yi
+    sel = ok[has]
+    x = yi
+    n_ok = int(ok.sum())
+    # start: all repeat differences read as noise
+    sn2 = max(float(np.mean(rep[sel] ** 2)) / 2, 1e-6) if sel.any() else float(np.var(yi))
+    sv2 = min_sv**2
+    for _ in range(iters):
+        vel = np.abs(np.gradient(x))
+        timing = (vel[has] * lag_sd_frames) ** 2
+        if sel.any():
+            sv2 = max((float(np.mean(rep[sel] ** 2 - timing[sel])) - 2 * sn2) / 2, min_sv**2)
+        cvar = 2 * sv2 + timing
+        # scaled by sn2: (Qm + sn2 * prior) x = Qm y, whose hat matrix is (...)^-1 Qm
+        A = Qm + sn2 * (R.T @ sparse.diags(1.0 / cvar) @ R) + P2
+        try:
+            lu = splu(A.tocsc())
+        except RuntimeError:  # singular: leave the series as it is
+            return y.copy(), {"noise_sd": float("nan"), "stride_sd": float("nan")}
+        x = lu.solve(Qm @ y0)
+        r = np.where(ok, y - x, 0.0)
+        edf = float(np.trace(lu.solve(Qd)))
+        sn2 = max(float(r @ (Qm @ r)) / max(n_ok - edf, 1.0), 1e-6)
+    return x, {"noise_sd": float(np.sqrt(sn2)), "stride_sd": float(np.sqrt(sv2))}
+
+
 def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cutoff_hz=7.0,
-                    lag_sd_frames=0.35, min_strides=2.0):
+                    lag_sd_frames=0.35, min_strides=2.0, robust_iters=3, outlier_k=10.0, fill_max_gap=10):
     """Cross-stride smoothing of keypoint tracks: running repeats itself, noise does not.
 
     A runner's stride repeats with small stride-to-stride changes, while
@@ -286,11 +471,23 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
         with :func:`noise_model` when not given.  The data term uses the AR(1)
         precision, so correlated noise is not mistaken for motion.
 
+    robust_iters, outlier_k : int, float
+        Iteratively reweighted fits: a detection whose residual exceeds about
+        ``outlier_k`` noise standard deviations is down-weighted (weight
+        ``1 / (1 + (r / k)^4)``), so detector outliers and left/right swaps need no
+        separate rejection step (a running-median test would also cut the fast
+        turns of the ankles at touchdown).
+    fill_max_gap : int
+        Missing runs up to this length are filled by the model (the same phase of
+        the neighbouring strides, not a straight line); longer runs stay NaN.
+
     Returns
     -------
     ndarray (F, J, 3) or None
         None when the clip shows fewer than ``min_strides`` repeating strides
         (too short, or not running): the caller falls back to a plain low-pass.
+        Joints detected in fewer than half the frames are NaN (not smoothed); the
+        score channel is passed through.
     """
     from scipy import sparse
     from scipy.sparse.linalg import splu
@@ -309,48 +506,27 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
         return None
     xy = kp[..., :2]
     ok = np.all(np.isfinite(xy), -1)
-    trunk = np.nanmean(np.where(ok[:, _TRUNK, None], xy[:, _TRUNK], np.nan), axis=1)  # (F, 2)
-    if np.isfinite(trunk).all(1).sum() < F // 2:
+    tracks = _relative_tracks(kp, fps, noise)
+    if tracks is None:
         return None
-    trunk = np.column_stack([fill_gaps(trunk[:, c], F) for c in range(2)])
-    ref = _lowpass_series(trunk, fps, 1.5)
-    # body scale: hip-to-neck and hip-to-shoulder distances, heavily smoothed
-    span = np.nanmean(np.stack([np.linalg.norm(xy[:, 9] - xy[:, 0], axis=-1),
-                                np.linalg.norm(xy[:, 11] - xy[:, 4], axis=-1),
-                                np.linalg.norm(xy[:, 14] - xy[:, 1], axis=-1)], 1), axis=1)
-    span = fill_gaps(span, F)
-    if not np.isfinite(span).any() or np.nanmedian(span) <= 0:
-        return None
-    span = np.where(np.isfinite(span), span, np.nanmedian(span))
-    scale = butterworth(median_filter(span, size=int(fps) | 1, mode="nearest"), fps, 0.5)
-    rel = (xy - ref[:, None]) / scale[:, None, None]
-    T0 = stride_period_frames(rel, fps)
+    rel, ref, scale, rel_t = tracks
+    T0 = stride_period_frames(rel_t, fps)
     if not np.isfinite(T0) or F < min_strides * T0:
         return None
-    lag = _local_lags(rel.reshape(F, -1), T0)
+    lag = _local_lags(rel_t.reshape(F, -1), T0)
     sn = noise / scale  # noise sd per frame in relative units
     t = np.arange(F)
-    has = np.isfinite(lag) & (t + np.nan_to_num(lag) + 1 < F)
-    pos = t[has] + lag[has]
-    k = np.floor(pos).astype(int)
-    a = pos - k
-    m = int(has.sum())
-    rows = np.arange(m)
-    # coupling operator R: (R x)_i = x_t - (1 - a) x_k - a x_{k+1}
-    R = sparse.csr_matrix((np.concatenate([np.ones(m), -(1 - a), -a]),
-                           (np.concatenate([rows, rows, rows]), np.concatenate([t[has], k, k + 1]))),
-                          shape=(m, F))
-    D2 = sparse.diags([np.ones(F - 2), -2 * np.ones(F - 2), np.ones(F - 2)], [0, 1, 2], shape=(F - 2, F))
-    wc = 2 * np.pi * smooth_cutoff_hz / fps
-    lam_s = 1.0 / (2 - 2 * np.cos(min(wc, np.pi))) ** 2  # relative to the data weight
-    P2 = lam_s * (D2.T @ D2)
-    # precision of unit-variance AR(1) noise: tridiag(-rho, 1 + rho^2, -rho) / (1 - rho^2)
-    diag = np.full(F, 1 + rho**2)
-    diag[[0, -1]] = 1.0
-    Q = sparse.diags([diag, np.full(F - 1, -rho), np.full(F - 1, -rho)], [0, 1, -1]) / (1 - rho**2)
+    R, has = _coupling(lag)
+    P2 = _smoothness(F, fps, smooth_cutoff_hz)
+    Q = _ar1_precision(F, rho)
     sn2_all = sn**2
     P2 = P2.multiply(np.mean(1.0 / sn2_all))  # smoothness relative to the mean data weight
-    out = kp.copy()
+    out = np.full_like(kp, np.nan)
+    out[..., 2:] = kp[..., 2:]
+    short_gap = np.zeros((F, 17), bool)
+    for j in range(17):
+        gap = ~ok[:, j]
+        short_gap[:, j] = gap & np.isfinite(fill_gaps(np.where(gap, np.nan, 0.0), fill_max_gap))
     for j in range(17):
         y = rel[:, j]
         okj = ok[:, j]
@@ -365,16 +541,25 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
         timing = (vel[has] * lag_sd_frames) ** 2 / 2  # per coordinate
         rep = R @ yi  # per coordinate: var = 2 s_v^2 + 2 s_n^2 + timing
         sel = okj[has]
-        sv2 = float(np.mean(np.sum(rep[sel] ** 2, -1) / 2 - timing[sel] - 2 * sn2_all[has][sel])) / 2
+        q_mean = float(np.mean(np.sum(rep[sel] ** 2, -1) / 2))
+        sv2 = (q_mean - float(np.mean(timing[sel] + 2 * sn2_all[has][sel]))) / 2
         sv2 = max(sv2, 0.05 * float(np.median(sn2_all)))
         cvar = 2 * sv2 + timing
         # data term with the AR(1) noise precision (tridiagonal), missing frames left out
-        sq = np.where(okj, 1.0 / np.sqrt(sn2_all), 0.0)
-        W = sparse.diags(sq) @ Q @ sparse.diags(sq)
-        A = W + R.T @ sparse.diags(1.0 / cvar) @ R + P2
-        lu = splu(A.tocsc())
-        for c in range(2):
-            rhs = W @ np.where(okj, y[:, c], 0.0)
-            out[:, j, c] = lu.solve(rhs) * scale + ref[:, c]
-        out[~okj, j] = np.nan
+        prior = R.T @ sparse.diags(1.0 / cvar) @ R + P2
+        y0 = np.where(okj[:, None], y, 0.0)
+        w = okj.astype(float)
+        for it in range(robust_iters + 1):
+            sq = np.sqrt(w / sn2_all)
+            W = sparse.diags(sq) @ Q @ sparse.diags(sq)
+            lu = splu((W + prior).tocsc())
+            x = np.column_stack([lu.solve(W @ y0[:, c]) for c in range(2)])
+            if it == robust_iters:
+                break
+            # detector outliers and left/right swaps: redescending (Cauchy-type) weights on the
+            # standardised residual, so one wild detection does not drag its neighbours
+            r = np.linalg.norm(y - x, axis=-1) / np.sqrt(sn2_all)
+            w = np.where(okj, 1.0 / (1.0 + (np.nan_to_num(r) / outlier_k) ** 4), 0.0)
+        out[:, j, :2] = x * scale[:, None] + ref
+        out[~(okj | short_gap[:, j]), j] = np.nan
     return out

@@ -23,7 +23,7 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from .camera import undistort_normalized
-from .filtering import clean_keypoints
+from .filtering import clean_keypoints, noise_model, periodic_smooth_series, stride_lags
 from .skeleton import JOINT_INDEX, SEGMENT_BONES, joint_angles
 from .trajectory import GroundTrack, fit_ground_track
 
@@ -35,6 +35,7 @@ __all__ = [
     "pixel_rays",
     "estimate_segments",
     "lift",
+    "smooth_angles_across_strides",
     "ANTHROPOMETRIC_RATIOS",
 ]
 
@@ -106,6 +107,12 @@ class LiftConfig:
     min_score: float = 0.3
     ankle_height_m: float = 0.07
     smooth_cutoff_hz: float | str | None = "auto"  # keypoint low-pass before lifting (None: off)
+    # cross-stride smoothing of the lifted hip, knee and elbow angles (True / False / "auto":
+    # when the keypoints are cleaned here and are noisy); see :func:`smooth_angles_across_strides`
+    cross_stride_angles: bool | str = "auto"
+    angle_noise_rho: float = 0.5
+    angle_smooth_cutoff_hz: float = 14.0
+    noise_floor_px: float = 1.5
 
 
 @dataclass(frozen=True)
@@ -271,8 +278,83 @@ def _viterbi(emission, transition):
     return path
 
 
+def _rotate(v, axis, angle):
+    """Rodrigues rotation of vectors v (F, 3) about unit axes (F, 3) by angles (F,) (radians)."""
+    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
+    return v * c + np.cross(axis, v) * s + axis * np.sum(axis * v, -1, keepdims=True) * (1 - c)
+
+
+def _unit_or(v, fallback):
+    n = np.linalg.norm(v, axis=-1, keepdims=True)
+    return np.where(n > 1e-9, v / np.maximum(n, 1e-12), fallback)
+
+
+def smooth_angles_across_strides(joints_track_m, forward, lag, fps, rho=0.5, smooth_cutoff_hz=14.0):
+    """Cross-stride smoothing of the hip, knee and elbow angles of a lifted clip.
+
+    Detector noise reaches each lifted angle as a series of its own, new in every
+    stride, while the running pattern repeats with small stride-to-stride changes.
+    Each hip, knee and elbow angle series is smoothed with
+    :func:`probreg.filtering.periodic_smooth_series` (noise level and stride
+    variability estimated from the series itself), and the joints are moved
+    rigidly so that the skeleton has exactly the smoothed angles: the whole leg
+    turns about the hip in the sagittal plane (hip angle), the shank about the
+    knee and the forearm about the elbow in the limb's own plane (flexion).
+    Segment lengths are unchanged.
+
+    Parameters
+    ----------
+    joints_track_m : ndarray (F, 17, 3)
+    forward : ndarray (F, 3)
+        Running direction per frame (as for :func:`probreg.skeleton.joint_angles`).
+    lag : ndarray (F,)
+        Stride lag per frame (:func:`probreg.filtering.stride_lags`).
+    fps : float
+    rho : float
+        Lag-1 correlation of the angle noise.
+
+    Returns
+    -------
+    joints : ndarray (F, 17, 3)
+    info : dict
+        Per angle ``(noise_sd, stride_sd)`` in degrees as estimated by the smoother.
+    """
+    j = np.array(joints_track_m, float)
+    f = np.asarray(forward, float)
+    left = np.column_stack([-f[:, 1], f[:, 0], np.zeros(len(f))])
+    info = {}
+
+    def smoothed(name):
+        y = joint_angles(j, forward=f)[name]
+        x, inf = periodic_smooth_series(y, lag, fps, rho=rho, smooth_cutoff_hz=smooth_cutoff_hz)
+        info[name] = (inf["noise_sd"], inf["stride_sd"])
+        d = np.radians(x - y)
+        return np.where(np.isfinite(d), d, 0.0), x
+
+    for side in ("l", "r"):
+        hip, knee, ankle = (J[f"{side}_{n}"] for n in ("hip", "knee", "ankle"))
+        # hip angle: the leg turns about the hip; turning by -d about ``left`` raises the
+        # thigh's angle atan2(v.f, -v.z) by d
+        d, _ = smoothed(f"hip_{side}")
+        for k in (knee, ankle):
+            j[:, k] = j[:, hip] + _rotate(j[:, k] - j[:, hip], left, -d)
+        # knee flexion (the angle between thigh and shank directions): the shank turns away
+        # from the thigh's direction in their common plane
+        for (a, b, c), name, default in (((hip, knee, ankle), f"knee_{side}", left),
+                                         ((J[f"{side}_shoulder"], J[f"{side}_elbow"], J[f"{side}_wrist"]),
+                                          f"elbow_{side}", -left)):
+            d, x = smoothed(name)
+            u = j[:, b] - j[:, a]
+            v = j[:, c] - j[:, b]
+            axis = _unit_or(np.cross(u, v), default)
+            # flexion is unsigned: a target below zero stays at a straight limb
+            d = np.where(np.isfinite(x) & (x < 0), d - np.radians(x), d)
+            j[:, c] = j[:, b] + _rotate(v, axis, d)
+    return j, info
+
+
 def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | None = None,
-         config: LiftConfig = LiftConfig()):
+         config: LiftConfig = LiftConfig(), stride_lag=None):
     """Lift 2D keypoints to 3D joints in the track frame.
 
     Parameters
@@ -287,10 +369,15 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
     track : GroundTrack, optional
         Precomputed ground track (else fitted here).
     config : LiftConfig
+    stride_lag : ndarray (F,), optional
+        Stride lag per frame for the cross-stride angle smoothing
+        (:func:`probreg.filtering.stride_lags`); computed from the keypoints when needed.
 
     Returns
     -------
     LiftResult
+        ``extra["angle_noise"]``: per smoothed angle, the estimated noise and
+        stride-to-stride sd (degrees), when the cross-stride angle smoothing ran.
 
     Raises
     ------
@@ -305,8 +392,12 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
     kp[kp[..., 2] < config.min_score] = np.nan
     kp[~np.all(np.isfinite(kp), -1)] = np.nan
     raw_missing = ~np.all(np.isfinite(kp), -1)
+    cross = config.cross_stride_angles
+    if cross == "auto":  # the same rule as the cross-stride keypoint cleaning
+        noise = noise_model(kp)[0]
+        cross = config.smooth_cutoff_hz == "auto" and (not np.isfinite(noise) or noise > config.noise_floor_px)
     if config.smooth_cutoff_hz is not None:
-        kp = clean_keypoints(kp, fps, cutoff_hz=config.smooth_cutoff_hz)
+        kp = clean_keypoints(kp, fps, cutoff_hz=config.smooth_cutoff_hz, noise_floor_px=config.noise_floor_px)
     F = len(kp)
     cams = cameras if isinstance(cameras, CameraArrays) else camera_arrays(cameras)
     if len(cams.valid) != F:
@@ -375,6 +466,12 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
     # a joint whose ray is missing stays missing (no candidate is invented)
     missing = ~np.all(np.isfinite(rays), -1)
     joints[missing] = np.nan
+    extra = {}
+    if cross:
+        lag = stride_lag if stride_lag is not None else stride_lags(kp, fps)
+        if lag is not None:
+            joints, extra["angle_noise"] = smooth_angles_across_strides(
+                joints, fwd, lag, fps, rho=config.angle_noise_rho, smooth_cutoff_hz=config.angle_smooth_cutoff_hz)
     status = []
     for i in range(F):
         if not cams.valid[i]:
@@ -387,4 +484,5 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
             status.append("interpolated")
         else:
             status.append("ok")
-    return LiftResult(joints_track_m=joints, status=status, miss_m=miss, track=track, segments_m=seg)
+    return LiftResult(joints_track_m=joints, status=status, miss_m=miss, track=track, segments_m=seg,
+                      extra=extra)

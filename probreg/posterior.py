@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .filtering import clean_keypoints, noise_model
+from .filtering import clean_keypoints, noise_model, stride_lags
 from .kinematics import gait_summary
 from .lifting import CameraArrays, LiftConfig, estimate_segments, lift
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
@@ -144,6 +144,10 @@ class ClipModel:
         self.kp = clean_keypoints(self.raw, self.fps)
         self.noise_sd, self.noise_rho = noise_model(self.raw)
         self.F = len(self.kp)
+        # stride timing for the cross-stride angle smoothing of every lifting (None: no
+        # repeating strides, or keypoints too clean to need it -- as in lift()'s "auto")
+        noisy = not np.isfinite(self.noise_sd) or self.noise_sd > LiftConfig().noise_floor_px
+        self.stride_lag = stride_lags(self.kp, self.fps) if noisy else None
         self.branch = branch
         self.track_weight = float(track_weight)
         self.max_gap_frames = 25
@@ -462,7 +466,9 @@ class ClipModel:
         Each draw is lifted twice: from the cleaned keypoints (the draw's *point*
         lifting: calibration and limb-length uncertainty) and from the cleaned
         keypoints plus re-simulated detector noise, cleaned again exactly as the
-        data were (parametric bootstrap: adds the detector noise).
+        data were (parametric bootstrap: adds the detector noise).  Both liftings
+        smooth the hip, knee and elbow angles across strides as :func:`lift` does for
+        noisy clips (with the clip's stride timing, found once).
 
         Returns
         -------
@@ -478,7 +484,9 @@ class ClipModel:
                "angles": {k: np.full((S, self.F), np.nan) for k in ANGLE_NAMES},
                "angles_point": {k: np.full((S, self.F), np.nan) for k in ANGLE_NAMES},
                "gait": {}}
-        cfg = LiftConfig(**{**config.__dict__, "smooth_cutoff_hz": None})
+        cross = config.cross_stride_angles
+        cross = self.stride_lag is not None if cross == "auto" else bool(cross)
+        cfg = LiftConfig(**{**config.__dict__, "smooth_cutoff_hz": None, "cross_stride_angles": cross})
         L = self.lengths(draws)
         per_joint = self._joint_noise_scale()
         with_noise = bootstrap_noise and np.isfinite(self.noise_sd) and self.noise_sd > 0
@@ -495,7 +503,7 @@ class ClipModel:
             for suffix, kp in variants:
                 # the same contacts for every draw (detected once on the cleaned keypoints)
                 tr = fit_ground_track(cams, kp, self.fps, contacts=self.contacts)
-                res = lift(cams, kp, self.fps, segments_m=seg, track=tr, config=cfg)
+                res = lift(cams, kp, self.fps, segments_m=seg, track=tr, config=cfg, stride_lag=self.stride_lag)
                 a = res.angles_deg()
                 out["joints" + suffix][s] = res.joints_track_m
                 for k in ANGLE_NAMES:

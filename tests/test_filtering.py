@@ -3,7 +3,8 @@
 import numpy as np
 import pytest
 
-from probreg.filtering import clean_keypoints, noise_model, periodic_smooth, stride_period_frames
+from probreg.filtering import (clean_keypoints, noise_model, periodic_smooth, periodic_smooth_series,
+                               stride_lags, stride_period_frames)
 from probreg.runner import Anthropometry, gait_for_style, simulate_runner
 from probreg.skeleton import JOINT_INDEX as J
 from probreg.skeleton import joint_angles
@@ -85,3 +86,58 @@ def test_periodic_smoothing_declines_without_repeating_strides():
     assert periodic_smooth(short, 50.0) is None
     out = clean_keypoints(kp, 50.0)  # falls back to the low-pass, never fails
     assert out.shape == kp.shape and np.isfinite(out).all()
+
+
+def test_noise_model_is_not_fooled_by_sampling_noise_of_one_ratio():
+    """250 frames: the multi-lag fit stays near the truth where a two-lag ratio wanders."""
+    errs = []
+    for seed in range(8):
+        rng = np.random.default_rng(100 + seed)
+        e = _ar1(rng, (250, 17, 2), 5.0, 0.5)
+        sd, rho = noise_model(np.concatenate([e, np.ones((250, 17, 1))], -1))
+        errs.append((abs(sd - 5.0), abs(rho - 0.5)))
+    errs = np.array(errs)
+    assert errs[:, 0].max() < 1.0 and errs[:, 1].max() < 0.2
+
+
+def test_periodic_smoothing_rejects_outliers_without_cutting_fast_turns(runner_views):
+    m, truth, noisy = runner_views
+    rng = np.random.default_rng(5)
+    wild = noisy.copy()
+    hits = rng.random(wild.shape[:2]) < 0.01
+    wild[..., :2] += hits[..., None] * rng.choice([-1, 1], wild.shape[:2] + (2,)) * 80.0  # 20 sigma
+    err = lambda kp, j: np.sqrt(np.nanmean(np.sum((kp[:, j, :2] - truth[:, j, :2]) ** 2, -1)))  # noqa: E731
+    clean = periodic_smooth(noisy, 50.0)
+    robust = periodic_smooth(wild, 50.0)
+    ankle = J["r_ankle"]
+    # outliers cost little: the fit down-weights them itself
+    assert err(robust, ankle) < 1.15 * err(clean, ankle)
+    assert err(robust, ankle) < err(wild, ankle) * 0.7
+
+
+def test_periodic_series_smoothing_known_noise_and_gaps():
+    rng = np.random.default_rng(8)
+    t = np.arange(400)
+    T = 34.5
+    truth = 45 + 40 * np.sin(2 * np.pi * t / T) + 12 * np.sin(4 * np.pi * t / T + 1)
+    truth = truth + np.repeat(rng.normal(0, 1.5, 400 // 34 + 1), 34)[:400]  # stride-to-stride changes
+    y = truth + _ar1(rng, (400,), 6.0, 0.5)
+    y[100:106] = np.nan
+    x, info = periodic_smooth_series(y, np.full(400, T), 50.0)
+    ok = np.isfinite(y)
+    assert np.mean(np.abs(x - truth)[ok]) < 0.6 * np.mean(np.abs(y - truth)[ok])
+    assert np.all(np.isfinite(x[100:106])) and np.max(np.abs(x[100:106] - truth[100:106])) < 10
+    assert 4.0 < info["noise_sd"] < 8.0
+    # without a stride lag the series is returned as it is
+    same, info2 = periodic_smooth_series(y, None, 50.0)
+    assert np.array_equal(same, y, equal_nan=True) and np.isnan(info2["noise_sd"])
+
+
+def test_stride_lags_follow_the_stride(runner_views):
+    m, truth, noisy = runner_views
+    lag = stride_lags(noisy, 50.0)
+    T = 50.0 * 2 / m.gait.step_freq_hz
+    assert lag is not None and abs(np.nanmedian(lag) - T) < 1.5
+    rng = np.random.default_rng(2)
+    walk = np.concatenate([np.cumsum(rng.normal(0, 3.0, (200, 17, 2)), axis=0) + 500, np.ones((200, 17, 1))], -1)
+    assert stride_lags(walk, 50.0) is None

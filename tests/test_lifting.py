@@ -141,3 +141,57 @@ def test_lift_command(small_clip, tmp_path):
     status = json.loads((out / "lift.json").read_text())["frame_status"]
     assert len(status) == 40
     assert main(["lift", str(small_clip), "--cameras", str(tmp_path / "none.json"), "--out", str(out)]) == 2
+
+
+@pytest.fixture(scope="module")
+def long_run():
+    """A 250-frame running clip in memory (no images): strides repeat, keypoints are noisy."""
+    from probreg.synth import config_from_preset, synthesize
+
+    return synthesize(config_from_preset("run", 21, n_frames=250), seed=21, preset="run")
+
+
+def test_cross_stride_angle_smoothing_moves_joints_to_the_smoothed_angles(long_run):
+    from probreg.filtering import periodic_smooth_series, stride_lags
+    from probreg.lifting import smooth_angles_across_strides
+
+    c = long_run
+    seg = c.motion.anthropometry.segments_m()
+    res = lift(c.cameras, c.keypoints_px, c.config.fps, segments_m=seg,
+               config=LiftConfig(cross_stride_angles=False))
+    j, fwd = res.joints_track_m, res.track.forward
+    lag = stride_lags(c.keypoints_px, c.config.fps)
+    assert lag is not None
+    out, info = smooth_angles_across_strides(j, fwd, lag, c.config.fps)
+    before, after = joint_angles(j, forward=fwd), joint_angles(out, forward=fwd)
+    for name in ("knee_l", "knee_r", "hip_r", "elbow_l"):
+        want = periodic_smooth_series(before[name], lag, c.config.fps)[0]
+        if not name.startswith("hip"):  # flexion is unsigned: a straight limb at most
+            want = np.clip(want, 0, None)
+        ok = np.isfinite(before[name])
+        assert np.allclose(after[name][ok], want[ok], atol=1e-6), name
+        assert np.isfinite(info[name][0]) and info[name][0] > 0
+    # rigid moves: every segment keeps its length, the trunk does not move
+    for a, b in (("r_hip", "r_knee"), ("r_knee", "r_ankle"), ("l_elbow", "l_wrist")):
+        ia, ib = JOINT_INDEX[a], JOINT_INDEX[b]
+        assert np.allclose(np.linalg.norm(out[:, ib] - out[:, ia], axis=-1),
+                           np.linalg.norm(j[:, ib] - j[:, ia], axis=-1), equal_nan=True)
+    assert np.array_equal(out[:, :1], j[:, :1], equal_nan=True)
+
+
+def test_cross_stride_angle_smoothing_reduces_angle_error(long_run):
+    c = long_run
+    truth = joint_angles(c.motion.joints_track_m)
+    err = {}
+    for on in (False, True):
+        res = lift(c.cameras, c.keypoints_px, c.config.fps, config=LiftConfig(cross_stride_angles=on))
+        a = res.angles_deg()
+        err[on] = {k: np.nanmean(np.abs(a[k] - truth[k])) for k in ("knee_l", "knee_r", "elbow_l", "elbow_r")}
+        assert ("angle_noise" in res.extra) == on
+    for k in err[True]:
+        assert err[True][k] < err[False][k], k
+    # "auto" switches it on for noisy keypoints cleaned inside lift(), off for exact ones
+    auto = lift(c.cameras, c.keypoints_px, c.config.fps)
+    assert "angle_noise" in auto.extra
+    exact = np.concatenate([c.joints2d_px, np.ones(c.joints2d_px.shape[:2] + (1,))], -1)
+    assert "angle_noise" not in lift(c.cameras, exact, c.config.fps).extra
