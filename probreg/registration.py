@@ -164,8 +164,26 @@ class ClipRegistration:
         """Per-frame line-index offsets that give every physical line (``track_id``) one
         absolute index over the clip; frames that share no line with the previous ones fall
         back to the camera's lateral position, which also overrides the identities when they
-        would make the (static) camera jump sideways by a whole lane from one frame to the next."""
-        members = seq.members_at_height(height_m)
+        would make the (static) camera jump sideways by whole lanes from one frame to the next
+        (identities slip, and a frame that shares no line with the earlier ones and whose own
+        geometry is off can hand wrong indices to all its successors)."""
+        members = list(seq.members_at_height(height_m))
+        # frames off the clip's zoom path have a wrong family (a spurious or misplaced line):
+        # they must not hand line identities on; they get the offset of their neighbours
+        odd = set(_zoom_outliers(members))
+        trusted = [None if t in odd else m for t, m in enumerate(members)]
+        offsets = self._offsets_pass(seq, trusted)
+        for t in sorted(odd):
+            prev = [u for u in range(t - 1, -1, -1) if trusted[u] is not None]
+            nxt = [u for u in range(t + 1, len(members)) if trusted[u] is not None]
+            if prev or nxt:
+                ref = prev[0] if prev else nxt[0]
+                y_ref = trusted[ref].y_m - self.lane_width_m * offsets[ref]
+                offsets[t] = int(np.round((members[t].y_m - y_ref) / self.lane_width_m))
+        return _settle_offsets(offsets, trusted, self.lane_width_m)
+
+    def _offsets_pass(self, seq, members):
+        """The sequential pass of :meth:`track_offsets` over the trusted members."""
         offsets = np.zeros(len(members), int)
         known = {}  # track id -> absolute index
         prev_y = None
@@ -181,7 +199,7 @@ class ClipRegistration:
                     # the camera is static: its lateral position cannot jump by a lane between
                     # frames, so such a jump means the followed line identities slipped
                     geo = int(np.round((m.y_m - prev_y) / self.lane_width_m))
-                    if 1 <= abs(geo - off) <= 2 and abs(m.y_m - self.lane_width_m * geo - prev_y) < 0.3 * self.lane_width_m:
+                    if geo != off and abs(m.y_m - self.lane_width_m * geo - prev_y) < 0.3 * self.lane_width_m:
                         off = geo
             elif prev_y is not None:
                 off = int(np.round((m.y_m - prev_y) / self.lane_width_m))
@@ -216,8 +234,30 @@ class ClipRegistration:
         return self
 
 
+def _settle_offsets(offsets, members, lane_width_m, half_window=12):
+    """Second pass over the line-index offsets: the static camera's lateral position (member's
+    ``y`` minus the offset's lanes) is compared with its running median over the neighbouring
+    frames, and a frame off by whole lanes is moved back.  A short run of frames that took
+    wrong indices from one bad frame (whose geometry happened to fit a whole-lane jump) is
+    outvoted by the frames around it."""
+    offsets = offsets.copy()
+    idx = [t for t, m in enumerate(members) if m is not None]
+    if len(idx) < 3:
+        return offsets
+    y = np.array([members[t].y_m - lane_width_m * offsets[t] for t in idx])
+    for n, t in enumerate(idx):
+        lo, hi = max(0, n - half_window), min(len(idx), n + half_window + 1)
+        shift = int(np.round((y[n] - np.median(y[lo:hi])) / lane_width_m))
+        if shift:
+            offsets[t] += shift
+    return offsets
+
+
 def _zoom_outliers(cameras, half_window=12, rel_tol=0.02, n_sigma=6.0):
-    """Frames whose focal length leaves the clip's smooth zoom path (running median)."""
+    """Frames whose focal length leaves the clip's smooth zoom path (running median).
+
+    ``cameras``: Camera or family members (anything with ``focal_px``) or None per frame.
+    """
     f = np.array([np.log(c.focal_px) if c is not None else np.nan for c in cameras])
     ok = np.flatnonzero(np.isfinite(f))
     if len(ok) < 5:
