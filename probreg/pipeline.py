@@ -2,7 +2,10 @@
 
 Writes the result layout of ``CLIP_FORMAT.md``: ``angles.csv``, ``joints3d.npz``,
 ``camera.json``, ``posterior.nc`` and ``report.html`` (plus ``gait.json`` and
-``run.json`` with diagnostics and per-frame statuses).
+``run.json`` with diagnostics and per-frame statuses: ``ok``; ``bridged`` (no lanes in
+this frame, camera interpolated from its neighbours); ``bridged_inconsistent`` (lanes found
+but their family leaves the clip's zoom path, so it is treated like a frame without lanes);
+otherwise the lane status of the frame, e.g. ``too_few_lines``, ``no_straight``).
 """
 
 from __future__ import annotations
@@ -167,7 +170,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
         write_json(tmp / "camera.json", cj)
         idata.to_netcdf(str(tmp / "posterior.nc"))
         write_json(tmp / "gait.json", gait_s)
-        status = [("ok" if reg.frame_lanes[i].ok else "bridged") if c is not None else reg.frame_lanes[i].status
+        status = [("bridged_inconsistent" if model.inconsistent[i] else
+                   "ok" if reg.frame_lanes[i].ok else "bridged") if c is not None else reg.frame_lanes[i].status
                   for i, c in enumerate(cam_list)]
         write_json(tmp / "run.json", {"diagnostics": diag, "timings_s": timings, "height_m": height,
                                      "frame_status": status, "noise_px": model.noise_sd,

@@ -45,7 +45,7 @@ from .filtering import clean_keypoints, noise_model, stride_lags
 from .kinematics import gait_summary
 from .lifting import CameraArrays, LiftConfig, estimate_segments, lift
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
-from .registration import ClipRegistration, athlete_ground_track, lane_anchor_shift
+from .registration import ClipRegistration, _zoom_outliers, athlete_ground_track, lane_anchor_shift
 from .skeleton import ANGLE_NAMES, JOINT_INDEX
 from .trajectory import fit_ground_track
 
@@ -184,6 +184,7 @@ class ClipModel:
         """Per frame: the family on a dense focal grid, restricted to one branch, as arrays."""
         fams = self.reg.sequence.families
         self.valid = np.array([f is not None for f in fams])
+        self.inconsistent = np.zeros(self.F, bool)  # lanes found, family off the zoom path
         w = self.reg.image_size[0]
         self.logf = np.full((self.F, n), np.nan)
         self.h = np.full((self.F, n), np.nan)
@@ -272,6 +273,12 @@ class ClipModel:
         reg = self.reg
         seq = reg.sequence
         seq.branch = self.branch
+        # frames whose family leaves the clip's zoom path have a wrong family (a spurious or
+        # misplaced line): they are bridged from their neighbours like frames without lanes
+        odd = [i for i in _zoom_outliers(list(seq.members_at_height(self.h_ref))) if self.valid[i]]
+        if odd and len(odd) < self.valid.sum() - 2:
+            self.valid[odd] = False
+            self.inconsistent[odd] = True
         self.offsets = np.asarray(reg.track_offsets(seq, self.h_ref), int)
         cams = self.cameras_at(self.h_ref, offsets=self.offsets)
         self.offsets = self.offsets + lane_anchor_shift(athlete_ground_track(_as_list(cams), self.kp),

@@ -97,3 +97,25 @@ def test_slipped_line_identities_are_repaired(small_clip):
     cams, _ = reg.cameras(h, clip.keypoints_px, clip.athlete_lane, dist=gt.cameras[0].dist)
     lateral = np.array([abs(c.C[1] - g.C[1]) for c, g in zip(cams, gt.cameras) if c is not None])
     assert len(lateral) >= 36 and np.all(lateral < 0.3)
+
+
+def test_settling_pass_outvotes_short_runs_off_by_whole_lanes():
+    """The second pass of track_offsets: frames whose lateral camera position is off by whole
+    lanes from their neighbours' (indices handed on by one bad frame) are moved back."""
+    from types import SimpleNamespace
+
+    from probreg.registration import _settle_offsets
+
+    rng = np.random.default_rng(4)
+    lw = 1.22
+    true_off = np.full(60, 3)
+    y_true = -35.4 + rng.normal(0, 0.08, 60)  # the static camera, with per-frame jitter
+    members = [SimpleNamespace(y_m=y + lw * o) for y, o in zip(y_true, true_off)]
+    members[30] = None  # a frame without a member
+    wrong = true_off.copy()
+    wrong[40:44] += 8      # a short run that inherited wrong indices
+    wrong[12] -= 1         # one slipped frame
+    out = _settle_offsets(wrong, members, lw)
+    ok = [t for t in range(60) if members[t] is not None]
+    assert np.array_equal(out[ok], true_off[ok])
+    assert out[30] == wrong[30]  # frames without a member are left alone
