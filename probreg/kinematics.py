@@ -6,6 +6,8 @@ A gait cycle of one leg runs from one touchdown of that foot to the next
 
 from __future__ import annotations
 
+import warnings
+
 import numpy as np
 
 __all__ = ["touchdowns", "gait_cycles", "normalise_cycle", "cycle_curves", "gait_summary", "GAIT_FIELDS"]
@@ -99,7 +101,8 @@ def gait_summary(track, angles_deg, fps):
     step_s = float(np.median(np.diff(tds)) / fps) if len(tds) >= 2 else float("nan")
     speed = float(np.nanmedian(np.linalg.norm(track.velocity_mps, axis=1)))
     contact = float(np.mean(contact_times)) if contact_times else float("nan")
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN touchdown angles: NaN, no warning
         return {
             "cadence_spm": 60.0 / step_s if step_s > 0 else float("nan"),
             "step_length_m": speed * step_s,

@@ -45,7 +45,7 @@ from .filtering import clean_keypoints, noise_model, stride_lags
 from .kinematics import gait_summary
 from .lifting import CameraArrays, LiftConfig, estimate_segments, lift
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
-from .registration import ClipRegistration, _zoom_outliers, athlete_ground_track, lane_anchor_shift
+from .registration import ClipRegistration, athlete_ground_track, lane_anchor_shift
 from .skeleton import ANGLE_NAMES, JOINT_INDEX
 from .trajectory import fit_ground_track
 
@@ -273,9 +273,10 @@ class ClipModel:
         reg = self.reg
         seq = reg.sequence
         seq.branch = self.branch
-        # frames whose family leaves the clip's zoom path have a wrong family (a spurious or
-        # misplaced line): they are bridged from their neighbours like frames without lanes
-        odd = [i for i in _zoom_outliers(list(seq.members_at_height(self.h_ref))) if self.valid[i]]
+        # frames whose family leaves the clip's zoom path at every height have a wrong family (a
+        # spurious or misplaced line): they are bridged from their neighbours like frames
+        # without lanes
+        odd = [i for i in reg.glitch_frames() if self.valid[i]]
         if odd and len(odd) < self.valid.sum() - 2:
             self.valid[odd] = False
             self.inconsistent[odd] = True

@@ -168,9 +168,10 @@ class ClipRegistration:
         (identities slip, and a frame that shares no line with the earlier ones and whose own
         geometry is off can hand wrong indices to all its successors)."""
         members = list(seq.members_at_height(height_m))
-        # frames off the clip's zoom path have a wrong family (a spurious or misplaced line):
-        # they must not hand line identities on; they get the offset of their neighbours
-        odd = set(_zoom_outliers(members))
+        # frames whose family is off the clip's zoom path at every height have a wrong family
+        # (a spurious or misplaced line): they must not hand line identities on; they get the
+        # offset of their neighbours
+        odd = set(self.glitch_frames()) & {t for t, m in enumerate(members) if m is not None}
         trusted = [None if t in odd else m for t, m in enumerate(members)]
         offsets = self._offsets_pass(seq, trusted)
         for t in sorted(odd):
@@ -181,6 +182,24 @@ class ClipRegistration:
                 y_ref = trusted[ref].y_m - self.lane_width_m * offsets[ref]
                 offsets[t] = int(np.round((members[t].y_m - y_ref) / self.lane_width_m))
         return _settle_offsets(offsets, trusted, self.lane_width_m)
+
+    def glitch_frames(self, heights=tuple(np.geomspace(2.0, 60.0, 7)), min_share=0.8):
+        """Frames whose lane family leaves the clip's smooth zoom path at *every* camera height
+        (cached).  At a wrong height the focal length of a correct family also wanders, so
+        a frame singled out at one height only says little; a spurious or misplaced line makes
+        its frame an outlier whichever height is true.  Heights at which fewer than
+        ``min_share`` of the frames with lanes have a member do not vote."""
+        if getattr(self, "_glitches", None) is not None:
+            return self._glitches
+        seq = self.sequence
+        n_fam = sum(f is not None for f in seq.families)
+        sets = []
+        for h in heights:
+            members = list(seq.members_at_height(float(h)))
+            if sum(m is not None for m in members) >= max(min_share * n_fam, 5):
+                sets.append(set(_zoom_outliers(members)))
+        self._glitches = sorted(set.intersection(*sets)) if len(sets) >= 2 else []
+        return self._glitches
 
     def _offsets_pass(self, seq, members):
         """The sequential pass of :meth:`track_offsets` over the trusted members."""
@@ -230,6 +249,7 @@ class ClipRegistration:
             self.forward_px = -self.forward_px
             fams = [_family_or_none(fl, self.forward_px, self.lane_width_m) for fl in self.frame_lanes]
             self.sequence = SequenceCalibration(fams, self.image_size, self.lane_width_m)
+            self._glitches = None
         self._oriented = True
         return self
 
