@@ -119,3 +119,26 @@ def test_settling_pass_outvotes_short_runs_off_by_whole_lanes():
     ok = [t for t in range(60) if members[t] is not None]
     assert np.array_equal(out[ok], true_off[ok])
     assert out[30] == wrong[30]  # frames without a member are left alone
+
+
+def test_glitch_frames_are_off_the_zoom_path_at_every_height(small_clip):
+    """A frame is a glitch only when its family leaves the smooth zoom path whichever height
+    is true; a frame that wanders at one (wrong) height only is not singled out."""
+    from types import SimpleNamespace
+
+    reg = register_clip(load_clip(small_clip))
+    F = 60
+
+    class FakeSequence:
+        families = [object()] * F
+
+        def members_at_height(self, h):
+            f = 2000.0 * (h / 10.0) * np.exp(0.002 * np.arange(F))  # a smooth zoom
+            f[[10, 25]] *= 1.3  # bad families: off the path at every height
+            if h > 20:
+                f[40] *= 1.3  # off the path at high heights only
+            return [SimpleNamespace(focal_px=v) for v in f]
+
+    reg.sequence = FakeSequence()
+    reg._glitches = None
+    assert reg.glitch_frames() == [10, 25]
