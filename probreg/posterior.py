@@ -45,7 +45,7 @@ from .filtering import clean_keypoints, noise_model, stride_lags
 from .kinematics import gait_summary
 from .lifting import CameraArrays, LiftConfig, estimate_segments, lift
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
-from .registration import ClipRegistration, athlete_ground_track, lane_anchor_shift
+from .registration import ClipRegistration, _zoom_outliers, athlete_ground_track, lane_anchor_shift
 from .skeleton import ANGLE_NAMES, JOINT_INDEX
 from .trajectory import fit_ground_track
 
@@ -175,8 +175,8 @@ class ClipModel:
         self.track_weight = saved
         if np.isfinite(lp).any():
             self.h_ref = float(self.grid[int(np.nanargmax(np.where(np.isfinite(lp), lp, -np.inf)))])
-            self._fix_offsets()
-            self._precompute()
+        self._fix_offsets(final=True)
+        self._precompute()
         self.timings = {"precompute_s": time.perf_counter() - t0}
 
     # ------------------------------------------------------------------ cameras as a function of h
@@ -216,6 +216,7 @@ class ClipModel:
             seg = hh[sl]
             lo, hi = min(lo, np.nanmin(seg)), max(hi, np.nanmax(seg))
         self.height_range = (lo, hi)
+        self.valid_lanes = self.valid.copy()
 
     def cameras_at(self, height_m, offsets=None):
         """Per-frame cameras of the family member at ``height_m`` as CameraArrays."""
@@ -268,7 +269,7 @@ class ClipModel:
         return CameraArrays(valid=valid, C=C, R=R, focal_px=f, principal_px=self.pp,
                             dist=np.zeros(5) if self.dist is None else self.dist)
 
-    def _fix_offsets(self):
+    def _fix_offsets(self, final=False):
         """Lane-index offsets (frame to frame and to the athlete's lane) at the reference height."""
         reg = self.reg
         seq = reg.sequence
@@ -276,7 +277,16 @@ class ClipModel:
         # frames whose family leaves the clip's zoom path at every height have a wrong family (a
         # spurious or misplaced line): they are bridged from their neighbours like frames
         # without lanes
-        odd = [i for i in reg.glitch_frames() if self.valid[i]]
+        # (and, once the reference height is settled, ``final``, the frames off the zoom path
+        # at that height: removing them at a first guess far from the truth would make that
+        # guess look consistent)
+        self.valid = self.valid_lanes.copy()
+        self.inconsistent[:] = False
+        odd = set(reg.glitch_frames())
+        if final:
+            odd |= set(_zoom_outliers(list(seq.members_at_height(self.h_ref))))
+        odd = sorted(odd)
+        odd = [i for i in odd if self.valid[i]]
         if odd and len(odd) < self.valid.sum() - 2:
             self.valid[odd] = False
             self.inconsistent[odd] = True

@@ -164,9 +164,11 @@ class ClipRegistration:
         """Per-frame line-index offsets that give every physical line (``track_id``) one
         absolute index over the clip; frames that share no line with the previous ones fall
         back to the camera's lateral position, which also overrides the identities when they
-        would make the (static) camera jump sideways by whole lanes from one frame to the next
-        (identities slip, and a frame that shares no line with the earlier ones and whose own
-        geometry is off can hand wrong indices to all its successors)."""
+        would make the (static) camera jump sideways by one or two lanes from one frame to the
+        next (identities slip).  Larger jumps are not repaired here: at a wrong height the
+        lateral position drifts and would be "repaired" into a self-consistent wrong answer.
+        Frames whose family is off the zoom path at every height (:meth:`glitch_frames`) do
+        not hand identities on, and a second pass outvotes short runs off by whole lanes."""
         members = list(seq.members_at_height(height_m))
         # frames whose family is off the clip's zoom path at every height have a wrong family
         # (a spurious or misplaced line): they must not hand line identities on; they get the
@@ -218,7 +220,7 @@ class ClipRegistration:
                     # the camera is static: its lateral position cannot jump by a lane between
                     # frames, so such a jump means the followed line identities slipped
                     geo = int(np.round((m.y_m - prev_y) / self.lane_width_m))
-                    if geo != off and abs(m.y_m - self.lane_width_m * geo - prev_y) < 0.3 * self.lane_width_m:
+                    if 1 <= abs(geo - off) <= 2 and abs(m.y_m - self.lane_width_m * geo - prev_y) < 0.3 * self.lane_width_m:
                         off = geo
             elif prev_y is not None:
                 off = int(np.round((m.y_m - prev_y) / self.lane_width_m))
