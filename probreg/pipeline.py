@@ -4,8 +4,7 @@ Writes the result layout of ``CLIP_FORMAT.md``: ``angles.csv``, ``joints3d.npz``
 ``camera.json``, ``posterior.nc`` and ``report.html`` (plus ``gait.json`` and
 ``run.json`` with diagnostics and per-frame statuses: ``ok``; ``bridged`` (no lanes in
 this frame, camera interpolated from its neighbours); ``bridged_inconsistent`` (lanes found
-but their family leaves the clip's zoom path at every camera height, so it is treated like
-a frame without lanes);
+but their family leaves the clip's zoom path, so it is treated like a frame without lanes);
 otherwise the lane status of the frame, e.g. ``too_few_lines``, ``no_straight``).
 """
 
