@@ -193,7 +193,6 @@ def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=
 
 # --------------------------------------------------------------------------- cross-stride smoothing
 #: Trunk joints (H36M order) whose smoothed mean is the reference point of the relative coordinates.
-
 _TRUNK = (0, 1, 4, 7, 8, 11, 14)
 
 
@@ -249,13 +248,15 @@ def stride_lags(keypoints_px, fps, min_strides=2.0):
     if kp.ndim != 3 or kp.shape[1] != 17 or F < 20:
         return None
     tracks = _relative_tracks(kp, fps, noise_model(kp)[0])
-    if tracks is None:
-        return None
-    rel_t = tracks[3]
+    return None if tracks is None else _lags_of(tracks[3], fps, min_strides)
+
+
+def _lags_of(rel_t, fps, min_strides):
+    """Local stride lags of outlier-free relative tracks, or None without repeating strides."""
     T0 = stride_period_frames(rel_t, fps)
-    if not np.isfinite(T0) or F < min_strides * T0:
+    if not np.isfinite(T0) or len(rel_t) < min_strides * T0:
         return None
-    return _local_lags(rel_t.reshape(F, -1), T0)
+    return _local_lags(rel_t.reshape(len(rel_t), -1), T0)
 
 
 def stride_period_frames(rel, fps, min_s=0.45, max_s=1.6):
@@ -510,10 +511,9 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
     if tracks is None:
         return None
     rel, ref, scale, rel_t = tracks
-    T0 = stride_period_frames(rel_t, fps)
-    if not np.isfinite(T0) or F < min_strides * T0:
+    lag = _lags_of(rel_t, fps, min_strides)
+    if lag is None:
         return None
-    lag = _local_lags(rel_t.reshape(F, -1), T0)
     sn = noise / scale  # noise sd per frame in relative units
     t = np.arange(F)
     R, has = _coupling(lag)
@@ -541,8 +541,7 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
         timing = (vel[has] * lag_sd_frames) ** 2 / 2  # per coordinate
         rep = R @ yi  # per coordinate: var = 2 s_v^2 + 2 s_n^2 + timing
         sel = okj[has]
-        q_mean = float(np.mean(np.sum(rep[sel] ** 2, -1) / 2))
-        sv2 = (q_mean - float(np.mean(timing[sel] + 2 * sn2_all[has][sel]))) / 2
+        sv2 = float(np.mean(np.sum(rep[sel] ** 2, -1) / 2 - timing[sel] - 2 * sn2_all[has][sel])) / 2
         sv2 = max(sv2, 0.05 * float(np.median(sn2_all)))
         cvar = 2 * sv2 + timing
         # data term with the AR(1) noise precision (tridiagonal), missing frames left out

@@ -322,10 +322,13 @@ def smooth_angles_across_strides(joints_track_m, forward, lag, fps, rho=0.5, smo
     j = np.array(joints_track_m, float)
     f = np.asarray(forward, float)
     left = np.column_stack([-f[:, 1], f[:, 0], np.zeros(len(f))])
+    # the moves below are rigid and each leaves the other angles as they are (the turn about
+    # the hip keeps the knee's flexion), so the angles are measured once
+    angles = joint_angles(j, forward=f)
     info = {}
 
     def smoothed(name):
-        y = joint_angles(j, forward=f)[name]
+        y = angles[name]
         x, inf = periodic_smooth_series(y, lag, fps, rho=rho, smooth_cutoff_hz=smooth_cutoff_hz)
         info[name] = (inf["noise_sd"], inf["stride_sd"])
         d = np.radians(x - y)

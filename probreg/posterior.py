@@ -274,19 +274,17 @@ class ClipModel:
         reg = self.reg
         seq = reg.sequence
         seq.branch = self.branch
-        # frames whose family leaves the clip's zoom path at every height have a wrong family (a
-        # spurious or misplaced line): they are bridged from their neighbours like frames
-        # without lanes
-        # (and, once the reference height is settled, ``final``, the frames off the zoom path
-        # at that height: removing them at a first guess far from the truth would make that
-        # guess look consistent)
+        # frames with a wrong family (a spurious or misplaced line) are bridged from their
+        # neighbours like frames without lanes: those off the clip's zoom path at every height
+        # and, once the reference height is settled (``final``), those off it at that height
+        # (removing them at a first guess far from the truth would make that guess look
+        # consistent)
         self.valid = self.valid_lanes.copy()
         self.inconsistent[:] = False
         odd = set(reg.glitch_frames())
         if final:
-            odd |= set(_zoom_outliers(list(seq.members_at_height(self.h_ref))))
-        odd = sorted(odd)
-        odd = [i for i in odd if self.valid[i]]
+            odd |= set(_zoom_outliers(seq.members_at_height(self.h_ref)))
+        odd = sorted(i for i in odd if self.valid[i])
         if odd and len(odd) < self.valid.sum() - 2:
             self.valid[odd] = False
             self.inconsistent[odd] = True

@@ -169,7 +169,7 @@ class ClipRegistration:
         lateral position drifts and would be "repaired" into a self-consistent wrong answer.
         Frames whose family is off the zoom path at every height (:meth:`glitch_frames`) do
         not hand identities on, and a second pass outvotes short runs off by whole lanes."""
-        members = list(seq.members_at_height(height_m))
+        members = seq.members_at_height(height_m)
         # frames whose family is off the clip's zoom path at every height have a wrong family
         # (a spurious or misplaced line): they must not hand line identities on; they get the
         # offset of their neighbours
@@ -177,10 +177,10 @@ class ClipRegistration:
         trusted = [None if t in odd else m for t, m in enumerate(members)]
         offsets = self._offsets_pass(seq, trusted)
         for t in sorted(odd):
-            prev = [u for u in range(t - 1, -1, -1) if trusted[u] is not None]
-            nxt = [u for u in range(t + 1, len(members)) if trusted[u] is not None]
-            if prev or nxt:
-                ref = prev[0] if prev else nxt[0]
+            # the nearest trusted frame before it, else after it
+            ref = next((u for u in range(t - 1, -1, -1) if trusted[u] is not None),
+                       next((u for u in range(t + 1, len(members)) if trusted[u] is not None), None))
+            if ref is not None:
                 y_ref = trusted[ref].y_m - self.lane_width_m * offsets[ref]
                 offsets[t] = int(np.round((members[t].y_m - y_ref) / self.lane_width_m))
         return _settle_offsets(offsets, trusted, self.lane_width_m)
@@ -195,12 +195,16 @@ class ClipRegistration:
             return self._glitches
         seq = self.sequence
         n_fam = sum(f is not None for f in seq.families)
-        sets = []
+        common, votes = None, 0
         for h in heights:
-            members = list(seq.members_at_height(float(h)))
+            members = seq.members_at_height(float(h))
             if sum(m is not None for m in members) >= max(min_share * n_fam, 5):
-                sets.append(set(_zoom_outliers(members)))
-        self._glitches = sorted(set.intersection(*sets)) if len(sets) >= 2 else []
+                odd = set(_zoom_outliers(members))
+                common = odd if common is None else common & odd
+                votes += 1
+                if votes >= 2 and not common:  # an intersection only shrinks
+                    break
+        self._glitches = sorted(common) if votes >= 2 else []
         return self._glitches
 
     def _offsets_pass(self, seq, members):
