@@ -190,7 +190,8 @@ class ClipRegistration:
         (cached).  At a wrong height the focal length of a correct family also wanders, so
         a frame singled out at one height only says little; a spurious or misplaced line makes
         its frame an outlier whichever height is true.  Heights at which fewer than
-        ``min_share`` of the frames with lanes have a member do not vote."""
+        ``min_share`` of the frames with lanes have a member do not vote; at the others a frame
+        with lanes but without a member counts as off the path."""
         if getattr(self, "_glitches", None) is not None:
             return self._glitches
         seq = self.sequence
@@ -199,7 +200,10 @@ class ClipRegistration:
         for h in heights:
             members = seq.members_at_height(float(h))
             if sum(m is not None for m in members) >= max(min_share * n_fam, 5):
-                odd = set(_zoom_outliers(members))
+                # a frame with lanes but no member at a height most frames reach is as odd as
+                # one off the zoom path there (its family does not fit the clip's camera)
+                odd = set(_zoom_outliers(members)) | {t for t, (fam, m) in enumerate(zip(seq.families, members))
+                                                      if fam is not None and m is None}
                 common = odd if common is None else common & odd
                 votes += 1
                 if votes >= 2 and not common:  # an intersection only shrinks

@@ -137,8 +137,17 @@ def test_glitch_frames_are_off_the_zoom_path_at_every_height(small_clip):
             f[[10, 25]] *= 1.3  # bad families: off the path at every height
             if h > 20:
                 f[40] *= 1.3  # off the path at high heights only
-            return [SimpleNamespace(focal_px=v) for v in f]
+            else:
+                f[50] *= 1.3  # off the path at low heights, and beyond its family's reach above
+            out = [SimpleNamespace(focal_px=v) for v in f]
+            if h > 20:
+                out[50] = None
+            if h < 3:
+                out[55] = None  # a frame whose branch ends below 3 m, on the path elsewhere
+            return out
 
     reg.sequence = FakeSequence()
     reg._glitches = None
-    assert reg.glitch_frames() == [10, 25]
+    # frame 50 has no member where it is not off the path: a frame with lanes but no member
+    # at a height most frames reach does not vouch for its family; frame 55 is fine above 3 m
+    assert reg.glitch_frames() == [10, 25, 50]
