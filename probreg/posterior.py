@@ -41,7 +41,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
-from .filtering import clean_keypoints, noise_model, stride_lags
+from .filtering import clean_keypoints, noise_model, score_noise_scale, stride_lags
 from .kinematics import gait_summary
 from .lifting import CameraArrays, LiftConfig, estimate_segments, lift
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
@@ -514,7 +514,7 @@ class ClipModel:
             if with_noise:
                 noisy = self.kp.copy()
                 noisy[..., :2] += (_ar1_noise(rng, self.kp.shape[:2] + (2,), self.noise_sd, self.noise_rho)
-                                   * per_joint[None, :, None])
+                                   * per_joint[..., None])
                 variants.append(("", clean_keypoints(noisy, self.fps)))
             for suffix, kp in variants:
                 # the same contacts for every draw (detected once on the cleaned keypoints)
@@ -553,12 +553,25 @@ class ClipModel:
                             dist=cams.dist)
 
     def _joint_noise_scale(self):
-        """Relative noise of each joint (trunk = 1) from the high-frequency residuals."""
+        """Relative noise sd of every detection (F, 17) for the bootstrap (trunk = 1).
+
+        Each joint's level comes from its residuals after cleaning; within a joint,
+        detections are scaled by what their confidence says about their error
+        (:func:`probreg.filtering.score_noise_scale`, normalised to unit RMS per
+        joint), so the re-simulated noise relates to the scores as the data's does
+        and the cleaning of the bootstrap copies weights them as it weighted the data."""
         resid = self.raw[..., :2] - self.kp[..., :2]
         rms = np.sqrt(np.nanmean(resid**2, axis=(0, 2)))
         trunk = np.nanmean(rms[[JOINT_INDEX["pelvis"], JOINT_INDEX["spine"], JOINT_INDEX["thorax"]]])
         scale = rms / trunk if np.isfinite(trunk) and trunk > 0 else np.ones(17)
-        return np.where(np.isfinite(scale), np.clip(scale, 0.5, 3.0), 1.0)
+        scale = np.where(np.isfinite(scale), np.clip(scale, 0.5, 3.0), 1.0)
+        out = np.tile(scale, (self.F, 1))
+        rel = score_noise_scale(self.raw, self.kp, self.noise_sd)
+        if rel is not None:
+            with np.errstate(invalid="ignore"):
+                unit = rel / np.sqrt(np.nanmean(rel**2, axis=0))[None]
+            out = out * np.where(np.isfinite(unit), unit, 1.0)
+        return out
 
 
 def _ar1_noise(rng, shape, sd, rho):

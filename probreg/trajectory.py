@@ -114,12 +114,20 @@ def cast_ankles(cameras, keypoints_px, ankle_height_m=0.07):
     return o[:, None, :] + t[..., None] * d
 
 
-def detect_contacts(ankles_m, fps, config: TrackConfig = TrackConfig()):
+def detect_contacts(ankles_m, fps, config: TrackConfig = TrackConfig(), camera_xy=None):
     """Contact flags ``[left, right]`` (F, 2) from the along-track speed of the cast ankles.
 
     Only the component along the running direction is used: across the track
     (in depth, for a broadcast camera) a cast point inherits the keypoint noise
     amplified by the grazing view of the ground, along the track it does not.
+
+    With the camera's ground position ``camera_xy`` (F, 2), the along-track speed
+    is read from the ankle's motion *across the viewing ray* only (divided by the
+    share of the running direction across the ray).  Along the ray a cast point
+    also moves when the ankle merely rises or sinks (by ``dz / tan(elevation)``),
+    which for a low camera looking obliquely along the straight is metres per
+    second during stance and hides every contact.  Frames seen nearly along the
+    running direction (share < 0.3) keep the plain along-track speed.
     """
     F = len(ankles_m)
     xy = ankles_m[..., :2]
@@ -139,6 +147,17 @@ def detect_contacts(ankles_m, fps, config: TrackConfig = TrackConfig()):
         speed[2:-2] = (along[4:] - along[:-4]) * fps / 4
     elif F >= 3:
         speed[1:-1] = (along[2:] - along[:-2]) * fps / 2
+    if camera_xy is not None and F >= 5:
+        ray = xy - np.asarray(camera_xy, float)[:, None, :]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ray = ray / np.linalg.norm(ray, axis=-1, keepdims=True)
+            across = np.stack([-ray[..., 1], ray[..., 0]], -1)  # (F, 2, 2): unit, across the ray
+            share = across @ direction  # running direction's component across the ray
+            vel = np.full((F, 2, 2), np.nan)
+            vel[2:-2] = (xy[4:] - xy[:-4]) * fps / 4
+            est = np.sum(vel * across, -1) / share
+        use = np.isfinite(est) & (np.abs(share) >= 0.3)
+        speed = np.where(use, est, speed)
     with np.errstate(invalid="ignore"):
         run = np.nanmedian(np.abs(np.diff(body @ direction))) * fps if ok.sum() > 1 else np.nan
         run = np.nanmedian(np.abs(speed)) if not np.isfinite(run) else run
@@ -197,7 +216,7 @@ def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: Tr
     F = len(keypoints_px)
     ankles = cast_ankles(cameras, keypoints_px, ankle_height_m)
     if contacts is None:
-        contacts = detect_contacts(ankles, fps, config)
+        contacts = detect_contacts(ankles, fps, config, camera_xy=_rays(cameras, np.zeros((F, 0, 2)))[0][:, :2])
     contacts = np.asarray(contacts, bool)
     cps = _contact_points(ankles, contacts)
     if len(cps) >= 3:
@@ -247,8 +266,14 @@ def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: Tr
         v0 = np.zeros(2)
     v0[1] = 0.0  # athletes follow their lane: start with no lateral velocity
     p0 = meas[keys[0]] - v0 * keys[0] * dt
+    # the lateral start is the footprints' median, as uncertain as their spread: started on
+    # the first footprint (a swinging foot taken for a contact, say), the filter would gate
+    # out every true footprint after it and keep the athlete in the wrong place
+    lat0 = np.array([meas[k][1] for k in keys])
+    p0[1] = float(np.median(lat0))
+    sd0 = 1.4826 * float(np.median(np.abs(lat0 - p0[1]))) if len(keys) >= 3 else 0.7
     kf.x = np.array([p0[0], v0[0], p0[1], v0[1]])
-    kf.P = np.diag([4.0, 4.0, 0.5, 0.1**2])
+    kf.P = np.diag([4.0, 4.0, float(np.clip(sd0, 0.05, 0.7)) ** 2, 0.1**2])
     xs, Ps = np.zeros((F, 4)), np.zeros((F, 4, 4))
     loglik = 0.0
     n_rejected = 0

@@ -141,3 +141,32 @@ def test_stride_lags_follow_the_stride(runner_views):
     rng = np.random.default_rng(2)
     walk = np.concatenate([np.cumsum(rng.normal(0, 3.0, (200, 17, 2)), axis=0) + 500, np.ones((200, 17, 1))], -1)
     assert stride_lags(walk, 50.0) is None
+
+
+def test_confidence_weighting_learns_from_the_clip(runner_views):
+    """Detections whose confidence is low are worse: a second pass weighted by what the
+    clip's own residuals say about the scores beats equal weights; constant scores change
+    nothing."""
+    from probreg.filtering import score_noise_scale
+
+    _, truth, _ = runner_views
+    rng = np.random.default_rng(21)
+    F = len(truth)
+    z = np.abs(rng.standard_normal((F, 17)))  # per-detection error scale
+    score = np.clip(0.95 - 0.1 * z + rng.normal(0, 0.02, (F, 17)), 0.05, 1.0)
+    noisy = truth.copy()
+    noisy[..., :2] += _ar1(rng, (F, 17, 2), 4.0, 0.5) * (0.3 + z)[..., None]
+    noisy[..., 2] = score
+    err = lambda kp: np.sqrt(np.nanmean(np.sum((kp[..., :2] - truth[..., :2]) ** 2, -1)))  # noqa: E731
+    plain = periodic_smooth(noisy, 50.0, score_weights=False)
+    weighted = periodic_smooth(noisy, 50.0)
+    assert err(weighted) < 0.9 * err(plain)
+    # the learned noise scale follows the true one
+    rel = score_noise_scale(noisy, truth, 4.0)
+    assert np.corrcoef(rel.ravel(), z.ravel())[0, 1] > 0.6
+    # uninformative (constant) scores: no second pass
+    flat = noisy.copy()
+    flat[..., 2] = 0.9
+    assert score_noise_scale(flat, truth, 4.0) is None
+    assert np.allclose(periodic_smooth(flat, 50.0), periodic_smooth(flat, 50.0, score_weights=False),
+                       equal_nan=True)
