@@ -523,7 +523,7 @@ def score_noise_scale(keypoints_px, fitted_px, noise_px, floor=0.1, outlier_cap=
 
 def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cutoff_hz=7.0,
                     lag_sd_frames=0.35, min_strides=2.0, robust_iters=3, outlier_k=10.0, fill_max_gap=10,
-                    rel_sd=None, score_weights=True):
+                    rel_sd=None, score_weights=True, ankle_cutoff_hz=10.0):
     """Cross-stride smoothing of keypoint tracks: running repeats itself, noise does not.
 
     A runner's stride repeats with small stride-to-stride changes, while
@@ -565,6 +565,15 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
     fill_max_gap : int
         Missing runs up to this length are filled by the model (the same phase of
         the neighbouring strides, not a straight line); longer runs stay NaN.
+    smooth_cutoff_hz : float or array (J,)
+        Half-power point of the smoothness term (per joint if an array).
+    ankle_cutoff_hz : float or None
+        The ankles' own (None: ``smooth_cutoff_hz``).  The ankle is the fastest joint of
+        a runner (its swing turns sharply at toe-off and touchdown); at 7 Hz the
+        smoothness term flattened those turns.  10 Hz for the ankles took the knee-angle
+        error with exact cameras from 3.47 to 3.17 deg on the benchmark suite, with
+        MPJPE unchanged (2.77 -> 2.76 cm); 10 Hz for every joint, or for the wrists
+        too, made MPJPE worse.
     rel_sd : ndarray (F, J), optional
         Noise sd of every detection relative to ``noise_px`` (given: used as is).
     score_weights : bool
@@ -611,10 +620,13 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
     sn = noise / scale  # noise sd per frame in relative units
     t = np.arange(F)
     R, has = _coupling(lag)
-    P2 = _smoothness(F, fps, smooth_cutoff_hz)
     Q = _ar1_precision(F, rho)
     sn2_all = sn**2
-    P2 = P2.multiply(np.mean(1.0 / sn2_all))  # smoothness relative to the mean data weight
+    cut = np.array(np.broadcast_to(np.asarray(smooth_cutoff_hz, float), (17,)))
+    if ankle_cutoff_hz is not None:
+        cut[[3, 6]] = ankle_cutoff_hz  # H36M r_ankle, l_ankle
+    # smoothness relative to the mean data weight, one matrix per distinct cut-off
+    P2s = {c: _smoothness(F, fps, c).multiply(np.mean(1.0 / sn2_all)) for c in set(cut.tolist())}
     out = np.full_like(kp, np.nan)
     out[..., 2:] = kp[..., 2:]
     short_gap = np.zeros((F, 17), bool)
@@ -639,7 +651,7 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
         sv2 = float(np.mean(np.sum(rep[sel] ** 2, -1) / 2 - timing[sel] - 2 * sn2_all[has][sel])) / 2
         sv2 = max(sv2, 0.05 * float(np.median(sn2_all)))
         cvar = 2 * sv2 + timing
-        prior = R.T @ sparse.diags(1.0 / cvar) @ R + P2
+        prior = R.T @ sparse.diags(1.0 / cvar) @ R + P2s[float(cut[j])]
         rs2 = None if rel_sd is None else np.nan_to_num(np.asarray(rel_sd, float)[:, j], nan=1.0) ** 2
         x, w = _robust_fit(y, okj, prior, Q, sn2_all, rs2, robust_iters, outlier_k)
         fits[j] = (prior, w)
