@@ -360,7 +360,7 @@ def _ar1_precision(F, rho):
     return sparse.diags([diag, np.full(F - 1, -rho), np.full(F - 1, -rho)], [0, 1, -1]) / (1 - rho**2)
 
 
-def periodic_smooth_series(y, lag, fps, rho=0.5, smooth_cutoff_hz=14.0, lag_sd_frames=0.35,
+def periodic_smooth_series(y, lag, fps, rho=0.0, smooth_cutoff_hz=14.0, lag_sd_frames=0.35,
                            min_sv=0.5, iters=4):
     """Cross-stride smoothing of one scalar series whose noise level is unknown.
 
