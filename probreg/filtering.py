@@ -583,7 +583,8 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
         weights.  On the benchmark suite (confidence falls with the detection
         error, as for a real detector) this cut the keypoint error after
         smoothing from 5.38 to 4.88 px and the knee-angle error of the lifting
-        with exact cameras from 3.92 to 3.49 deg (``reports/bench_lifting.md``).
+        with exact cameras from 3.92 to 3.49 deg when it was introduced (current
+        numbers: ``reports/bench_lifting.md``).
 
     Returns
     -------
