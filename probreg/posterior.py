@@ -476,7 +476,7 @@ class ClipModel:
         return sampler, tau
 
     # ------------------------------------------------------------------ propagation
-    def propagate(self, draws, rng, bootstrap_noise=True, config: LiftConfig = LiftConfig()):
+    def propagate(self, draws, rng, bootstrap_noise=True, config: LiftConfig = LiftConfig(), workers=None):
         """Lift the clip for every draw.
 
         Each draw is lifted twice: from the cleaned keypoints (the draw's *point*
@@ -486,6 +486,11 @@ class ClipModel:
         smooth the hip, knee and elbow angles across strides as :func:`lift` does for
         noisy clips (with the clip's stride timing, found once).
 
+        Every draw has its own random stream (spawned from ``rng``), so the result
+        does not depend on ``workers``: draws are shared out over that many forked
+        processes (default: the machine's cores, at most 4; 1, or a platform without
+        ``fork``, runs them here).
+
         Returns
         -------
         dict
@@ -493,20 +498,53 @@ class ClipModel:
             ``joints_point``, ``angles_point`` without; ``gait`` {name: (S,)} from the
             point liftings.
         """
+        import multiprocessing as mp
+        import os
+
         t0 = time.perf_counter()
         S = len(draws)
+        cross = config.cross_stride_angles
+        cross = self.stride_lag is not None if cross == "auto" else bool(cross)
+        cfg = LiftConfig(**{**config.__dict__, "smooth_cutoff_hz": None, "cross_stride_angles": cross})
+        L = self.lengths(draws)
+        seeds = rng.integers(0, 2**63 - 1, size=S)
+        with_noise = bootstrap_noise and np.isfinite(self.noise_sd) and self.noise_sd > 0
+        job = (draws, L, seeds, cfg, with_noise, self._joint_noise_scale() if with_noise else None)
+        workers = min(os.cpu_count() or 1, 4) if workers is None else int(workers)
+        workers = max(1, min(workers, S))
+        chunks = [list(range(S))[k::workers] for k in range(workers)]
+        if workers > 1 and "fork" in mp.get_all_start_methods():
+            global _PROPAGATION
+            _PROPAGATION = (self, job)
+            try:
+                with mp.get_context("fork").Pool(workers) as pool:
+                    parts = pool.map(_propagate_chunk, chunks)
+            finally:
+                _PROPAGATION = None
+        else:
+            parts = [self._propagate_draws(idx, *job) for idx in chunks]
         out = {"joints": np.full((S, self.F, 17, 3), np.nan, np.float32),
                "joints_point": np.full((S, self.F, 17, 3), np.nan, np.float32),
                "angles": {k: np.full((S, self.F), np.nan) for k in ANGLE_NAMES},
                "angles_point": {k: np.full((S, self.F), np.nan) for k in ANGLE_NAMES},
                "gait": {}}
-        cross = config.cross_stride_angles
-        cross = self.stride_lag is not None if cross == "auto" else bool(cross)
-        cfg = LiftConfig(**{**config.__dict__, "smooth_cutoff_hz": None, "cross_stride_angles": cross})
-        L = self.lengths(draws)
-        per_joint = self._joint_noise_scale()
-        with_noise = bootstrap_noise and np.isfinite(self.noise_sd) and self.noise_sd > 0
-        for s in range(S):
+        for part in parts:
+            for s, res in part.items():
+                for key in ("joints", "joints_point"):
+                    out[key][s] = res[key]
+                for key in ("angles", "angles_point"):
+                    for k in ANGLE_NAMES:
+                        out[key][k][s] = res[key][k]
+                for k, v in res["gait"].items():
+                    out["gait"].setdefault(k, np.full(S, np.nan))[s] = v
+        self.timings["propagation_s"] = time.perf_counter() - t0
+        return out
+
+    def _propagate_draws(self, indices, draws, L, seeds, cfg, with_noise, per_joint):
+        """The liftings of some draws: {draw index: {joints, joints_point, angles, angles_point, gait}}."""
+        out = {}
+        for s in indices:
+            rng = np.random.default_rng(int(seeds[s]))
             h = float(np.exp(draws[s, 0]))
             cams = self._jitter_bridged(self.cameras_at(h), rng)
             seg = {k: float(v[s]) for k, v in L.items()}
@@ -516,22 +554,19 @@ class ClipModel:
                 noisy[..., :2] += (_ar1_noise(rng, self.kp.shape[:2] + (2,), self.noise_sd, self.noise_rho)
                                    * per_joint[..., None])
                 variants.append(("", clean_keypoints(noisy, self.fps)))
+            res_s = {"gait": {}}
             for suffix, kp in variants:
                 # the same contacts for every draw (detected once on the cleaned keypoints)
                 tr = fit_ground_track(cams, kp, self.fps, contacts=self.contacts)
                 res = lift(cams, kp, self.fps, segments_m=seg, track=tr, config=cfg, stride_lag=self.stride_lag)
                 a = res.angles_deg()
-                out["joints" + suffix][s] = res.joints_track_m
-                for k in ANGLE_NAMES:
-                    out["angles" + suffix][k][s] = a[k]
+                res_s["joints" + suffix] = res.joints_track_m.astype(np.float32)
+                res_s["angles" + suffix] = a
                 if suffix == "_point":
-                    for k, v in gait_summary(res.track, a, self.fps).items():
-                        out["gait"].setdefault(k, np.full(S, np.nan))[s] = v
+                    res_s["gait"] = dict(gait_summary(res.track, a, self.fps))
             if not with_noise:
-                out["joints"][s] = out["joints_point"][s]
-                for k in ANGLE_NAMES:
-                    out["angles"][k][s] = out["angles_point"][k][s]
-        self.timings["propagation_s"] = time.perf_counter() - t0
+                res_s["joints"], res_s["angles"] = res_s["joints_point"], res_s["angles_point"]
+            out[s] = res_s
         return out
 
     def _jitter_bridged(self, cams, rng, deg_per_frame=0.01, zoom_per_frame=0.002):
@@ -572,6 +607,19 @@ class ClipModel:
                 unit = rel / np.sqrt(np.nanmean(rel**2, axis=0))[None]
             out = out * np.where(np.isfinite(unit), unit, 1.0)
         return out
+
+
+#: (model, job) handed to forked propagation workers (set only while a pool runs)
+_PROPAGATION = None
+
+
+def _propagate_chunk(indices):
+    from threadpoolctl import threadpool_limits
+
+    model, job = _PROPAGATION
+    # the workers already use every core: BLAS threads inside them only compete (4x slower)
+    with threadpool_limits(limits=1):
+        return model._propagate_draws(indices, *job)
 
 
 def _ar1_noise(rng, shape, sd, rho):

@@ -151,3 +151,20 @@ def test_run_refuses_a_clip_without_detections(small_clip, tmp_path, capsys):
     (clip_dir / "keypoints2d.json").write_text(json.dumps(doc))
     assert main(["run", str(clip_dir), "--out", str(tmp_path / "o")]) == 2
     assert "detected athlete" in capsys.readouterr().err
+
+
+def test_propagation_does_not_depend_on_the_number_of_workers(model):
+    """Every draw has its own random stream: forked workers give exactly the serial result."""
+    m, gt = model
+    h = gt.cameras[0].C[2]
+    draws = np.column_stack([np.log(np.full(3, h)) + [0.0, 0.02, -0.02], np.full(3, gt.athlete["stature_m"]),
+                             np.ones((3, len(PARAM_NAMES) - 2))])
+    one = m.propagate(draws, np.random.default_rng(4), workers=1)
+    two = m.propagate(draws, np.random.default_rng(4), workers=2)
+    assert np.array_equal(one["joints"], two["joints"], equal_nan=True)
+    assert np.array_equal(one["joints_point"], two["joints_point"], equal_nan=True)
+    for k in one["angles"]:
+        assert np.array_equal(one["angles"][k], two["angles"][k], equal_nan=True)
+    assert one["gait"].keys() == two["gait"].keys()
+    # the bootstrap adds noise: the noisy liftings differ from the point liftings
+    assert not np.allclose(one["joints"], one["joints_point"], equal_nan=True)
