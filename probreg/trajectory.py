@@ -173,28 +173,6 @@ def detect_contacts(ankles_m, fps, config: TrackConfig = TrackConfig(), camera_x
     return out
 
 
-def _best_contacts(ankles_m, fps, config, camera_xy):
-    """Contacts from the along-track speed read across the viewing ray or from the plain
-    along-track speed, whichever puts its footprints closer to one line along the track.
-
-    Across the ray is what a low camera looking obliquely along the straight needs (a
-    stance ankle that rises or sinks moves its cast point along the ray); for a far camera
-    at a grazing angle the cast points of a swinging foot move metres along the ray per
-    frame and what leaks across it can mimic a planted foot.  Footprints of a runner lie
-    on a line along the lane, feet taken for planted in swing scatter in depth, so the
-    set whose footprints scatter less laterally (robust sd) is kept."""
-    def spread(c):
-        cps = _contact_points(ankles_m, c)
-        if len(cps) < 4:
-            return np.inf
-        y = cps[:, 3]
-        return 1.4826 * float(np.median(np.abs(y - np.median(y))))
-
-    across = detect_contacts(ankles_m, fps, config, camera_xy=camera_xy)
-    plain = detect_contacts(ankles_m, fps, config)
-    return plain if spread(plain) < spread(across) else across
-
-
 def _contact_points(ankles_m, contacts):
     pts = []
     for s in (0, 1):
@@ -238,7 +216,7 @@ def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: Tr
     F = len(keypoints_px)
     ankles = cast_ankles(cameras, keypoints_px, ankle_height_m)
     if contacts is None:
-        contacts = _best_contacts(ankles, fps, config, _rays(cameras, np.zeros((F, 0, 2)))[0][:, :2])
+        contacts = detect_contacts(ankles, fps, config, camera_xy=_rays(cameras, np.zeros((F, 0, 2)))[0][:, :2])
     contacts = np.asarray(contacts, bool)
     cps = _contact_points(ankles, contacts)
     if len(cps) >= 3:

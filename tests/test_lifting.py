@@ -214,25 +214,3 @@ def test_contacts_from_a_low_oblique_camera():
     pel = clip.motion.joints_track_m[:, 0, :2]
     assert np.max(np.abs(tr.position_m[:, 1] - pel[:, 1])) < 0.15
 
-
-def test_contact_set_with_footprints_on_one_line_is_kept(monkeypatch):
-    """Of the two contact detectors, the one whose footprints scatter less across the track
-    wins (feet taken for planted in swing are cast metres beyond the athlete)."""
-    import probreg.trajectory as T
-
-    F = 120
-    ankles = np.zeros((F, 2, 3))
-    ankles[..., 0] = np.arange(F)[:, None] * 0.1
-    ankles[..., 1] = -5.0
-    far = np.zeros((F, 2), bool)
-    far[::7] = True  # "contacts" whose cast points lie far beyond the lane
-    ankles[far, 1] = -5.0 + 3.0 * np.sin(np.arange(far.sum()))
-    tight = np.zeros((F, 2), bool)
-    tight[1::7] = tight[2::7] = True
-    sets = {"across": far | tight, "plain": tight}
-    monkeypatch.setattr(T, "detect_contacts",
-                        lambda a, fps, config, camera_xy=None: sets["plain" if camera_xy is None else "across"])
-    assert np.array_equal(T._best_contacts(ankles, 50.0, T.TrackConfig(), np.zeros((F, 2))), tight)
-    sets["across"] = tight  # equally good: the across-the-ray set is kept
-    sets["plain"] = tight & (np.arange(F)[:, None] < 60)
-    assert np.array_equal(T._best_contacts(ankles, 50.0, T.TrackConfig(), np.zeros((F, 2))), tight)
