@@ -153,8 +153,11 @@ def test_run_refuses_a_clip_without_detections(small_clip, tmp_path, capsys):
     assert "detected athlete" in capsys.readouterr().err
 
 
-def test_propagation_does_not_depend_on_the_number_of_workers(model):
-    """Every draw has its own random stream: forked workers give exactly the serial result."""
+def test_propagation_does_not_depend_on_the_number_of_workers(model, monkeypatch):
+    """Every draw has its own random stream: forked workers give exactly the serial result,
+    and where no process may be started the draws run in this one."""
+    import multiprocessing
+
     m, gt = model
     h = gt.cameras[0].C[2]
     draws = np.column_stack([np.log(np.full(3, h)) + [0.0, 0.02, -0.02], np.full(3, gt.athlete["stature_m"]),
@@ -166,5 +169,13 @@ def test_propagation_does_not_depend_on_the_number_of_workers(model):
     for k in one["angles"]:
         assert np.array_equal(one["angles"][k], two["angles"][k], equal_nan=True)
     assert one["gait"].keys() == two["gait"].keys()
+
+    class NoProcesses:
+        def Pool(self, n):
+            raise OSError("no processes here")
+
+    monkeypatch.setattr(multiprocessing, "get_context", lambda method: NoProcesses())
+    fallback = m.propagate(draws, np.random.default_rng(4), workers=2)
+    assert np.array_equal(one["joints"], fallback["joints"], equal_nan=True)
     # the bootstrap adds noise: the noisy liftings differ from the point liftings
     assert not np.allclose(one["joints"], one["joints_point"], equal_nan=True)
