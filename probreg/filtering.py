@@ -279,6 +279,16 @@ def stride_period_frames(rel, fps, min_s=0.45, max_s=1.6):
     if not np.isfinite(d).any():
         return float("nan")
     i = int(np.nanargmin(d))
+    # two or three strides repeat the pattern as well as one does, and sampling the lag in
+    # whole frames can favour a multiple (at 31.05 frames per stride, lag 62 lands nearer to
+    # two periods than 31 to one): take the shortest sub-multiple whose own dip comes close
+    for k in (3, 2):
+        near = np.flatnonzero(np.abs(lags - lags[i] / k) <= 1.5)
+        if len(near) and np.isfinite(d[near]).any():
+            c = int(near[np.nanargmin(d[near])])
+            if 0 < c < i and d[c] <= 1.5 * d[i] and d[c] < 0.5 * np.nanmax(d[:c]):
+                i = c
+                break
     # a repeating pattern: an interior minimum well below the mismatch at shorter lags
     # (for running, the step lag swaps left and right); drifting tracks grow with the lag
     if not (0 < i < len(lags) - 1 and d[i] < 0.5 * np.nanmax(d[:i])):
