@@ -12,6 +12,7 @@ so the rows differ only in the method (and the paper's numbers are beside them).
 from __future__ import annotations
 
 import time
+import warnings
 
 import numpy as np
 
@@ -132,7 +133,9 @@ def run(args=None):
         for c, label in (("a", "(a) GT cameras, GT 2D"), ("b", "(b) GT cameras, noisy 2D"),
                          ("c", "(c) registered cameras, noisy 2D")):
             for m in methods:
-                v = np.nanmean(np.array(acc[(c, m)], float), axis=0)
+                with warnings.catch_warnings():  # the n/a columns of the planar rows
+                    warnings.simplefilter("ignore", RuntimeWarning)
+                    v = np.nanmean(np.array(acc[(c, m)], float), axis=0)
                 paper = PAPER.get(m) if c == "b" else None
                 ptxt = "-" if paper is None else " / ".join("-" if not np.isfinite(x) else f"{x:g}" for x in paper)
                 rows.append([label, m, v[0], v[1], v[2], ptxt])
