@@ -225,25 +225,32 @@ def _common_mode(xy, ok, fps, noise, trunk, offset_hz=3.0, k=4.0):
     """
     T = xy[:, _TRUNK]
     okT = ok[:, _TRUNK]
-    dev = np.where(okT[..., None], T - trunk[:, None], np.nan)
-    off = np.empty_like(dev)
-    for j in range(dev.shape[1]):
-        for c in range(2):
-            x = fill_gaps(hampel(dev[:, j, c], 4, 3.0, min_scale=max(2.0 * noise, 1.0) if np.isfinite(noise) else 1.0),
-                          len(xy))
-            if not np.isfinite(x).any():
-                x = np.zeros(len(xy))
-            off[:, j, c] = butterworth(np.where(np.isfinite(x), x, np.nanmedian(x)), fps, offset_hz)
-    est = np.where(okT[..., None], T - off, np.nan)  # (F, 7, 2)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)  # frames without any trunk joint
-        med = np.nanmedian(est, axis=1)
-        d = np.linalg.norm(est - med[:, None], axis=-1)
-        tol = k * max(noise if np.isfinite(noise) else 1.0, 0.5)
-        keep = np.isfinite(d) & (d <= tol)
-        ref = np.nanmean(np.where(keep[..., None], est, np.nan), axis=1)
-    ref = np.where(np.isfinite(ref), ref, med)
-    return np.column_stack([fill_gaps(ref[:, c], len(xy)) for c in range(2)])
+    F = len(xy)
+    scale = max(2.0 * noise, 1.0) if np.isfinite(noise) else 1.0
+    tol = k * max(noise if np.isfinite(noise) else 1.0, 0.5)
+    ref = trunk
+    # twice: the offsets are first read against the plain mean, which jumps where a trunk
+    # joint is missing, then against the common reference of the first pass
+    for _ in range(2):
+        dev = np.where(okT[..., None], T - ref[:, None], np.nan)
+        off = np.empty_like(dev)
+        for j in range(dev.shape[1]):
+            for c in range(2):
+                x = fill_gaps(hampel(dev[:, j, c], 4, 3.0, min_scale=scale), F)
+                if not np.isfinite(x).any():
+                    x = np.zeros(F)
+                off[:, j, c] = butterworth(np.where(np.isfinite(x), x, np.nanmedian(x)), fps, offset_hz)
+        est = np.where(okT[..., None], T - off, np.nan)  # (F, 7, 2): each joint's view of the common point
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # frames without any trunk joint
+            med = np.nanmedian(est, axis=1)
+            d = np.linalg.norm(est - med[:, None], axis=-1)
+            keep = np.isfinite(d) & (d <= tol)
+            new = np.nanmean(np.where(keep[..., None], est, np.nan), axis=1)
+        new = np.where(np.isfinite(new), new, med)
+        ref = np.column_stack([fill_gaps(new[:, c], F) for c in range(2)])
+        ref = np.where(np.isfinite(ref), ref, trunk)
+    return ref
 
 
 def _relative_tracks(kp, fps, noise):

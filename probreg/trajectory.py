@@ -39,12 +39,18 @@ class TrackConfig:
     contact_speed_frac : float
         A cast ankle slower than this fraction of the running speed is in contact.
     min_contact_frames : int
+    max_gap_s : float
+        Two contacts of one foot closer in time than this are one stance: a foot
+        cannot swing through in 0.1 s (a runner's swing takes 0.25 s or more), and a
+        stance split in two gives two footprints at one place a few frames apart,
+        which read as the athlete standing still.
     """
 
     accel_std_mps2: tuple = (1.5, 0.6)
     contact_std_m: tuple = (0.10, 0.03)
     contact_speed_frac: float = 0.35
     min_contact_frames: int = 2
+    max_gap_s: float = 0.1
 
 
 @dataclass(frozen=True)
@@ -165,9 +171,17 @@ def detect_contacts(ankles_m, fps, config: TrackConfig = TrackConfig(), camera_x
     with np.errstate(invalid="ignore"):
         contact = np.abs(speed) < thr
     out = np.zeros((F, 2), bool)
+    max_gap = int(np.floor(config.max_gap_s * fps))
     for s in (0, 1):
         edges = np.diff(np.concatenate([[0], contact[:, s].astype(int), [0]]))
-        for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+        runs = list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)))
+        merged = []
+        for a, b in runs:  # one stance split by a few noisy frames is still one stance
+            if merged and a - merged[-1][1] <= max_gap:
+                merged[-1] = (merged[-1][0], b)
+            else:
+                merged.append((a, b))
+        for a, b in merged:
             if b - a >= config.min_contact_frames:
                 out[a:b, s] = True
     return out

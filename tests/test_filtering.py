@@ -183,3 +183,49 @@ def test_confidence_weighting_learns_from_the_clip(runner_views):
     assert score_noise_scale(flat, truth, 4.0) is None
     assert np.allclose(periodic_smooth(flat, 50.0), periodic_smooth(flat, 50.0, score_weights=False),
                        equal_nan=True)
+
+
+def test_periodic_smoothing_keeps_camera_shake(runner_views):
+    # a shaking broadcast camera moves every joint alike by several px per frame; that
+    # is image motion the per-frame cameras also see, not detector noise: the smoother
+    # must keep it in every joint and still remove the noise
+    _, truth, noisy = runner_views
+    rng = np.random.default_rng(5)
+    shake = np.cumsum(rng.normal(0, 3.0, (len(truth), 1, 2)), axis=0)
+    shaken_truth = truth[..., :2] + shake
+    kp = noisy.copy()
+    kp[..., :2] += shake
+    sm = periodic_smooth(kp, 50.0)
+    assert sm is not None
+    err = lambda x: np.sqrt(np.nanmean(np.sum((x[..., :2] - shaken_truth) ** 2, -1)))  # noqa: E731
+    assert err(sm) < 0.6 * err(kp)
+    # the posture (knee angle in the image) comes out as well as without any shake
+    calm = periodic_smooth(noisy, 50.0)
+    e_shaken = np.sqrt(np.mean((_knee2d(sm) - _knee2d(truth)) ** 2))
+    e_calm = np.sqrt(np.mean((_knee2d(calm) - _knee2d(truth)) ** 2))
+    assert e_shaken < 1.1 * e_calm
+
+
+def test_common_reference_ignores_a_missing_trunk_joint(runner_views):
+    from probreg.filtering import _TRUNK, _common_mode
+
+    _, truth, _ = runner_views
+    xy = truth[..., :2]  # noise-free: what is left is what the missing joints do
+    ok = np.ones(xy.shape[:2], bool)
+    trunk = xy[:, list(_TRUNK)].mean(1)
+    full = _common_mode(xy, ok, 50.0, 4.0, trunk)
+    # both shoulders disappear in every other frame: the plain mean would jump by their
+    # offset from the trunk centre, the common reference must not
+    ok2 = ok.copy()
+    ok2[::2, J["l_shoulder"]] = False
+    ok2[::2, J["r_shoulder"]] = False
+    xy2 = np.where(ok2[..., None], xy, np.nan)
+    with np.errstate(invalid="ignore"):
+        trunk2 = np.nanmean(xy2[:, list(_TRUNK)], axis=1)
+    part = _common_mode(xy2, ok2, 50.0, 4.0, trunk2)
+    def jumps(d):  # frame-to-frame jumps of a difference of references (a slow drift is
+        # harmless: the relative tracks carry it and the output adds it back)
+        return np.linalg.norm(d[1:-1] - 0.5 * (d[:-2] + d[2:]), axis=-1).mean()
+
+    assert jumps(trunk2 - trunk) > 5.0
+    assert jumps(part - full) < 0.5

@@ -214,3 +214,30 @@ def test_contacts_from_a_low_oblique_camera():
     pel = clip.motion.joints_track_m[:, 0, :2]
     assert np.max(np.abs(tr.position_m[:, 1] - pel[:, 1])) < 0.15
 
+
+
+def test_a_stance_split_by_noisy_frames_is_one_contact():
+    """Noise that moves a stance ankle in one frame must not split the stance in two: two
+    footprints at one place a few frames apart read as the athlete standing still, and
+    the track filter then gates out every true footprint after them (the suite's
+    ``oddarms_a`` lost its running direction that way)."""
+    from probreg.synth import config_from_preset, synthesize
+    from probreg.trajectory import TrackConfig, cast_ankles, detect_contacts
+
+    clip = synthesize(config_from_preset("jog", 21, n_frames=120), seed=21, preset="jog")
+    F, fps = len(clip.cameras), clip.config.fps
+    j2 = np.concatenate([clip.joints2d_px, np.ones((F, 17, 1))], -1)
+    ankles = cast_ankles(camera_arrays(clip.cameras), j2, 0.07)
+    base = detect_contacts(ankles, fps)
+    edges = np.diff(np.concatenate([[0], base[:, 0].astype(int), [0]]))
+    starts, ends = np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)
+    a, b = next((s, e) for s, e in zip(starts, ends) if e - s >= 8)
+    moved = ankles.copy()
+    moved[a + 4, 0, 0] += 0.3  # one wild frame: the speed 2 frames either side looks like motion
+    split = detect_contacts(moved, fps, TrackConfig(max_gap_s=0.0))
+    assert split[a:b, 0].sum() < b - a - 1  # without merging, the stance breaks up
+    merged = detect_contacts(moved, fps)
+    assert merged[a:b, 0].all()
+    tr = fit_ground_track(clip.cameras, j2, fps, contacts=merged)
+    speed = np.median(np.linalg.norm(tr.velocity_mps, axis=1))
+    assert abs(speed - clip.motion.gait.speed_mps) < 0.1 * clip.motion.gait.speed_mps
