@@ -241,3 +241,23 @@ def test_a_stance_split_by_noisy_frames_is_one_contact():
     tr = fit_ground_track(clip.cameras, j2, fps, contacts=merged)
     speed = np.median(np.linalg.norm(tr.velocity_mps, axis=1))
     assert abs(speed - clip.motion.gait.speed_mps) < 0.1 * clip.motion.gait.speed_mps
+
+
+def test_viterbi_finds_the_cheapest_path_for_every_chain_at_once():
+    import itertools
+
+    from probreg.lifting import _viterbi
+
+    rng = np.random.default_rng(4)
+    C, F, S = 3, 5, 3
+    em = rng.uniform(0, 5, (C, F, S))
+    tr = rng.uniform(0, 5, (C, F - 1, S, S))
+    paths = _viterbi(em, tr)
+    assert paths.shape == (C, F)
+    for c in range(C):
+        def cost(p):
+            return em[c, np.arange(F), p].sum() + sum(tr[c, t, p[t], p[t + 1]] for t in range(F - 1))
+
+        best = min(itertools.product(range(S), repeat=F), key=lambda p: cost(np.array(p)))
+        assert tuple(paths[c]) == best
+        assert tuple(_viterbi(em[c], tr[c])) == best  # one chain alone: the same
