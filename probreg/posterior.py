@@ -57,7 +57,7 @@ __all__ = ["ClipModel", "SamplerSettings", "noise_model", "PARAM_NAMES", "angle_
 #: misses the smoothing bias of the estimator (peaks flattened by the smoothing, true
 #: stride-to-stride differences pulled towards the neighbouring strides by the cross-stride
 #: prior), so its spread alone under-covers.
-BAND_INFLATION = 1.83
+BAND_INFLATION = 1.92
 
 
 def angle_bands(angles_point, angles_noisy, lo=5.0, hi=95.0, inflation=None):
