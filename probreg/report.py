@@ -143,6 +143,41 @@ def clip_report(clip_dir, out_html):
     return rep.save(out_html)
 
 
+def scale_note(stature_prior, stature_draws):
+    """What sets the metric scale of a run, in words for the report.
+
+    Lanes fix the camera only up to its one degree of freedom, and a 2D skeleton has
+    no size of its own: the athlete's stature prior is what turns pixels into metres.
+    When the clip narrows the stature little beyond its prior, the camera height, the
+    limb lengths, step length and speed carry the prior's uncertainty (joint angles do
+    not depend on the scale).
+
+    >>> from probreg.priors import NormalPrior
+    >>> rng = np.random.default_rng(0)
+    >>> "follows the stature prior" in scale_note(NormalPrior(1.76, 0.10), rng.normal(1.76, 0.095, 4000))
+    True
+    >>> "follows the stature prior" in scale_note(NormalPrior(1.76, 0.10), rng.normal(1.80, 0.02, 4000))
+    False
+    """
+    lo_p, hi_p = stature_prior.interval(0.9)
+    v = np.asarray(stature_draws, float)
+    v = v[np.isfinite(v)]
+    if len(v) < 2 or not hi_p > lo_p:
+        return "Metric scale: no stature draws to judge it by."
+    lo, hi = np.percentile(v, [5, 95])
+    med = float(np.median(v))
+    half = 50.0 * (hi - lo) / med
+    text = (f"Metric scale: athlete's stature {med:.2f} m, 90 % interval [{lo:.2f}, {hi:.2f}] "
+            f"(prior [{lo_p:.2f}, {hi_p:.2f}]).")
+    if (hi - lo) > 0.7 * (hi_p - lo_p):
+        text += (f" The clip adds little to the prior here, so the metric scale follows the stature prior: "
+                 f"camera height, limb lengths, step length and speed are uncertain by about +-{half:.0f} % "
+                 f"(90 %), and they are only as right as that prior for this athlete. Joint angles do not "
+                 f"depend on the scale. Give the athlete's measured stature (--stature, --stature-sd) to "
+                 f"pin it.")
+    return text
+
+
 def run_report(out_html, clip, result, joints_median, cameras):
     """Report of a pipeline run: posterior of the calibration and the athlete, angle bands, gait."""
     import matplotlib
@@ -163,6 +198,7 @@ def run_report(out_html, clip, result, joints_median, cameras):
         rows.append([var.replace("_m", " (m)"), float(np.median(v)), float(np.percentile(v, 5)),
                      float(np.percentile(v, 95))])
     rep.table(["quantity", "median", "5 %", "95 %"], rows, fmt="{:.3f}")
+    rep.paragraph(scale_note(result.model.priors.stature, post["stature"].values.ravel()), cls="note")
     rep.paragraph(f"emcee: {d['walkers']} walkers x {d['steps']} steps, acceptance "
                   f"{d['acceptance_fraction']:.2f}, max integrated autocorrelation time "
                   f"{max(d['tau'].values()):.0f} steps ({d['steps_per_tau']:.0f} tau), ESS(height) "

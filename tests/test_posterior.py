@@ -107,6 +107,8 @@ def test_run_pipeline_writes_the_result_layout(small_clip, tmp_path):
     assert {"chain", "draw"} <= set(idata.posterior.dims) and "height_m" in idata.posterior
     assert "keypoints_px" in idata.observed_data and "sample_stats" in idata.groups()
     assert res.diagnostics["steps"] >= 150
+    # the report says what sets the metric scale (here: the default stature prior)
+    assert "Metric scale:" in (out / "report.html").read_text(encoding="utf-8")
 
 
 def test_missing_lanes_still_give_a_posterior_with_wider_bands(small_clip, tmp_path):
