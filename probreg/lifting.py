@@ -439,7 +439,6 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
             joints[:, J[name]] = _side_pick(sols, c, left, sign)
             miss[:, J[name]] = m
     # limb chains: candidates, then Viterbi over the clip
-    z = np.array([0.0, 0.0, 1.0])
     lean = np.arctan2(np.sum((joints[:, J["thorax"]] - joints[:, J["pelvis"]]) * fwd, -1),
                       (joints[:, J["thorax"]] - joints[:, J["pelvis"]])[:, 2])
     pelvis = joints[:, J["pelvis"]]
