@@ -199,7 +199,7 @@ class ClipModel:
         for i, fam in enumerate(fams):
             if fam is None:
                 continue
-            m = fam.members(fgrid)
+            m = self._members(i, fam, fgrid)
             ok = m["valid"] & np.isfinite(m["height_m"])
             if ok.sum() < 3:
                 self.valid[i] = False
@@ -217,6 +217,17 @@ class ClipModel:
             lo, hi = min(lo, np.nanmin(seg)), max(hi, np.nanmax(seg))
         self.height_range = (lo, hi)
         self.valid_lanes = self.valid.copy()
+
+    def _members(self, i, fam, fgrid):
+        """Members of frame ``i``'s family at the focal lengths ``fgrid`` (lines undistorted
+        with each member's own focal length when the lens distortion is given)."""
+        if self.dist is None or not np.any(self.dist):
+            return fam.members(fgrid)
+        from .registration import undistorted_members
+
+        lo, hi = self.priors.camera_height.interval(0.998)
+        return undistorted_members(self.reg.frame_lanes[i], fam, fgrid, self.dist, self.reg.forward_px,
+                                   self.reg.lane_width_m, height_window=(lo / 1.5, hi * 1.5))
 
     def cameras_at(self, height_m, offsets=None):
         """Per-frame cameras of the family member at ``height_m`` as CameraArrays."""
