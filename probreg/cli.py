@@ -80,6 +80,16 @@ def _cmd_run(args):
     return 0
 
 
+def _cmd_sensitivity(args):
+    from .sensitivity import distortion_study, parse_k1_list
+
+    study = distortion_study(args.clip, args.out, parse_k1_list(args.k1), _run_options(args),
+                             reference_k1=args.reference_k1)
+    print(study.to_markdown(), end="")
+    print(f"results: {args.out} (sensitivity.md, sensitivity.json, sensitivity.csv; one result folder per k1)")
+    return 0
+
+
 def _cmd_demo(args):
     from .pipeline import run_clip
     from .report import clip_report
@@ -342,6 +352,16 @@ def build_parser():
     r.add_argument("--out", type=Path, required=True)
     _add_run_options(r)
     r.set_defaults(func=_cmd_run)
+
+    sv = sub.add_parser("sensitivity", help="how much the results depend on the lens distortion assumed (k1 sweep)")
+    sv.add_argument("clip", type=Path)
+    sv.add_argument("--out", type=Path, required=True)
+    sv.add_argument("--k1", default="-0.2,-0.1,0,0.1,0.2",
+                    help="radial coefficients to try, OpenCV normalised coordinates (write --k1=-0.2,0,0.2)")
+    sv.add_argument("--reference-k1", type=float, default=None,
+                    help="hypothesis the others are compared with (default: the k1 of --dist, else 0)")
+    _add_run_options(sv)
+    sv.set_defaults(func=_cmd_sensitivity)
 
     c = sub.add_parser("calibrate", help="lanes -> vanishing point -> one-DOF camera family -> cameras")
     c.add_argument("clip", type=Path)

@@ -154,23 +154,7 @@ def test_glitch_frames_are_off_the_zoom_path_at_every_height(small_clip):
     assert reg.glitch_frames() == [10, 25, 50]
 
 
-def _distorted_frame_lanes(cam, n_lines=6, n_pts=200):
-    """Sub-pixel support points of lane lines 1..n seen through ``cam`` (with its distortion)."""
-    from probreg.lanes import FrameLanes, LaneLine, _fit_line
-
-    lines = []
-    for k in range(1, n_lines + 1):
-        x = np.linspace(cam.C[0] - 80, cam.C[0] + 80, 4000)
-        P = np.column_stack([x, np.full_like(x, -1.22 * k), np.zeros_like(x)])
-        uv, depth = cam.project(P, return_depth=True)
-        ok = (depth > 0) & cam.in_image(uv, margin_px=-5)
-        uv = uv[ok][np.linspace(0, ok.sum() - 1, n_pts).astype(int)]
-        lines.append(LaneLine(line=_fit_line(uv), points_px=uv, rms_px=0.0, index=k - 1))
-    l0, l1 = lines[0].line, lines[-1].line
-    return FrameLanes(status="ok", lines=tuple(lines), vanishing_point=np.cross(l0, l1), image_size=cam.image_size)
-
-
-def test_distortion_aware_family_recovers_the_camera():
+def test_distortion_aware_family_recovers_the_camera(distorted_lanes):
     """Lines bent by a wide lens: the family of the distorted lines misses the true camera
     by percents; undistorting with every member's own focal length recovers it."""
     from probreg.calibration import CalibrationFamily
@@ -179,7 +163,7 @@ def test_distortion_aware_family_recovers_the_camera():
 
     dist = np.array([-0.25, 0.03, 0.0, 0.0, 0.0])
     cam = Camera.look_at([30.0, -25.0, 7.0], [45.0, -5.0, 0.5], fov_deg=30.0, dist=dist)
-    fl = _distorted_frame_lanes(cam)
+    fl = distorted_lanes(cam)
     assert line_straightness_px(fl) > 0.3  # visibly bent
     fwd = cam.project(np.array([[50.0, -3.0, 0.0]]))[0] - cam.project(np.array([[40.0, -3.0, 0.0]]))[0]
     fam = CalibrationFamily.from_frame_lanes(fl, forward_px=fwd / np.linalg.norm(fwd), lane_width_m=1.22)

@@ -24,6 +24,7 @@ BENCHMARKS = {
     "posterior": "probreg.bench.posterior:run",
     "band-calibration": "probreg.bench.band_calibration:run",
     "detect": "probreg.bench.detect:run",
+    "distortion": "probreg.bench.distortion:run",
 }
 
 
