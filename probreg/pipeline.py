@@ -5,7 +5,9 @@ Writes the result layout of ``CLIP_FORMAT.md``: ``angles.csv``, ``joints3d.npz``
 ``run.json`` with diagnostics and per-frame statuses: ``ok``; ``bridged`` (no lanes in
 this frame, camera interpolated from its neighbours); ``bridged_inconsistent`` (lanes found
 but their family leaves the clip's zoom path, so it is treated like a frame without lanes);
-otherwise the lane status of the frame, e.g. ``too_few_lines``, ``no_straight``).
+``bridged_no_member`` (lanes found, but their family has no member at the clip's camera
+height, e.g. a misdetected line; bridged likewise); ``no_member`` (the same, at the clip's
+start or end, where there is nothing to bridge from: no camera); otherwise the lane status of the frame, e.g. ``too_few_lines``, ``no_straight``).
 """
 
 from __future__ import annotations
@@ -112,6 +114,17 @@ def _diagnostics(sampler, tau, idata):
     }
 
 
+def _frame_status(lanes, camera, inconsistent, gap_distance):
+    """The ``run.json`` status of one frame (see the module docstring)."""
+    if camera is None:
+        return "no_member" if lanes.ok else lanes.status
+    if inconsistent:
+        return "bridged_inconsistent"
+    if not lanes.ok:
+        return "bridged"
+    return "ok" if gap_distance == 0 else "bridged_no_member"
+
+
 def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
     """Run the full pipeline on a clip folder and write the result folder.
 
@@ -170,8 +183,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
         write_json(tmp / "camera.json", cj)
         idata.to_netcdf(str(tmp / "posterior.nc"))
         write_json(tmp / "gait.json", gait_s)
-        status = [("bridged_inconsistent" if model.inconsistent[i] else
-                   "ok" if reg.frame_lanes[i].ok else "bridged") if c is not None else reg.frame_lanes[i].status
+        status = [_frame_status(reg.frame_lanes[i], c, bool(model.inconsistent[i]), model.gap_distance[i])
                   for i, c in enumerate(cam_list)]
         write_json(tmp / "run.json", {"diagnostics": diag, "timings_s": timings, "height_m": height,
                                      "frame_status": status, "noise_px": model.noise_sd,

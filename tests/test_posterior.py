@@ -181,3 +181,17 @@ def test_propagation_does_not_depend_on_the_number_of_workers(model, monkeypatch
     assert np.array_equal(one["joints"], fallback["joints"], equal_nan=True)
     # the bootstrap adds noise: the noisy liftings differ from the point liftings
     assert not np.allclose(one["joints"], one["joints_point"], equal_nan=True)
+
+
+def test_frame_status_says_how_each_camera_came_about():
+    from probreg.lanes import FrameLanes
+    from probreg.pipeline import _frame_status
+
+    ok, none = FrameLanes(status="ok"), FrameLanes(status="no_lines")
+    cam = object()
+    assert _frame_status(ok, cam, False, 0) == "ok"
+    assert _frame_status(ok, cam, False, 3) == "bridged_no_member"  # lanes, but no member at this height
+    assert _frame_status(ok, cam, True, 3) == "bridged_inconsistent"
+    assert _frame_status(none, cam, False, 2) == "bridged"
+    assert _frame_status(none, None, False, 0) == "no_lines"
+    assert _frame_status(ok, None, False, 0) == "no_member"

@@ -126,7 +126,7 @@ def run(args=None):
                 ("knee-angle error of the posterior median", "<= 3 deg", f"{summ['knee_deg']:.2f} deg",
                  summ["knee_deg"] <= 3),
                 ("pelvis-aligned 3D error", "<= 4 cm", f"{summ['mpjpe_cm']:.2f} cm", summ["mpjpe_cm"] <= 4),
-                ("camera height", "within 5 %", f"{summ['height_pct']:.1f} %", summ["height_pct"] <= 5),
+                ("camera height", "within 5 %", f"{summ['height_pct']:.2f} %", summ["height_pct"] <= 5),
                 ("camera location", "within 2 % of distance", f"{summ['loc_pct']:.2f} %", summ["loc_pct"] <= 2),
                 ("FOV", "within 0.5 deg", f"{summ['fov_deg']:.3f} deg", summ["fov_deg"] <= 0.5),
                 ("knee frames inside the 90 % band", "85-95 %", f"{100 * summ['knee_coverage']:.1f} %",
