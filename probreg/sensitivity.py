@@ -142,8 +142,9 @@ class DistortionStudy:
         p = self.plumb_line
         if "best_k1" in p:
             g = np.asarray(p["k1_grid"])
-            lines += ["", f"Plumb-line check on a finer grid ({g[0]:+.3f} to {g[-1]:+.3f}, the reference run's "
-                      f"cameras): straightest at k1 = {p['best_k1']:+.3f} ({p['best_px']:.3f} px)"
+            lines += ["", f"Plumb-line check on a finer grid ({g[0]:+.3f} to {g[-1]:+.3f}, with the cameras of "
+                      f"the k1 = {p['cameras_of_k1']:+.3f} run): straightest at k1 = {p['best_k1']:+.3f} "
+                      f"({p['best_px']:.3f} px)"
                       + ("; at the edge of the grid, so the lanes favour a value beyond it" if p["at_edge"] else "")
                       + (f"; the curve varies by only {p['range_px']:.3f} px over the grid, so the lanes hardly "
                          "constrain the lens here" if p["range_px"] < 0.02 else "") + "."]
@@ -286,14 +287,17 @@ def distortion_study(clip_dir, out_dir, k1_values, options: RunOptions = RunOpti
             "frames_ok": int(cams.valid.sum()),
             "angles": angles, "gait": gait, "result_dir": str(Path(res.out_dir)),
         })
-    # plumb-line curve on a fine grid, with the reference run's cameras
-    ref_cams = next(v for k, v in runs.items() if np.isclose(k, reference_k1))[3]
+    # plumb-line curve on a fine grid, with the cameras of the run whose own hypothesis left the
+    # straightest lines (its focal lengths come from lines undistorted consistently; a run that
+    # ignores a strong lens gets them wrong, and k1 scales with f^2)
+    k_cam = min(runs, key=lambda k: np.nan_to_num(runs[k][2], nan=np.inf))
+    ref_cams = runs[k_cam][3]
     lo, hi = min(ks), max(ks)
     pad = max(0.1 * (hi - lo), 0.02)
     grid = np.linspace(lo - pad, hi + pad, 41)
     curve = lane_straightness_curve(ref_model_lanes(ref_res), np.where(ref_cams.valid, ref_cams.focal_px, np.nan),
                                     grid, base)
-    plumb = {"k1_grid": grid.tolist(), "straightness_px": curve.tolist()}
+    plumb = {"k1_grid": grid.tolist(), "straightness_px": curve.tolist(), "cameras_of_k1": float(k_cam)}
     if np.isfinite(curve).any():
         j = int(np.nanargmin(curve))
         plumb.update(best_k1=float(grid[j]), best_px=float(curve[j]),

@@ -86,8 +86,8 @@ def run(args=None):
             best = min(study.rows, key=lambda r: np.nan_to_num(r["lane_straightness_px"], nan=np.inf))
             p = study.plumb_line
             rep.add(f"Straightest lane lines among the runs: k1 = {best['k1']:+.3f}. Plumb-line check on a "
-                    f"41-value grid ({p['k1_grid'][0]:+.3f} to {p['k1_grid'][-1]:+.3f}) with the true-k1 run's "
-                    f"cameras: straightest at k1 = {p.get('best_k1', float('nan')):+.3f} "
+                    f"41-value grid ({p['k1_grid'][0]:+.3f} to {p['k1_grid'][-1]:+.3f}) with the cameras of the "
+                    f"straightest run (k1 = {p['cameras_of_k1']:+.3f}): straightest at k1 = {p.get('best_k1', float('nan')):+.3f} "
                     f"(curve range {p.get('range_px', float('nan')):.3f} px).\n")
             numbers[name]["plumb_line_k1"] = p.get("best_k1")
             # the same with the athlete's stature known (sd 2 cm): the metric scale no longer rests
