@@ -310,7 +310,7 @@ def _family_or_none(fl: FrameLanes, forward_px, lane_width_m):
 
 
 def undistorted_members(frame_lanes: FrameLanes, family, focal_px, dist, forward_px=(1.0, 0.0),
-                        lane_width_m=1.22, anchor_ratio=1.5, height_window=None, max_points=None):
+                        lane_width_m=1.22, anchor_ratio=1.5, height_window=None):
     """Family members at ``focal_px`` for lines seen through a distorting lens.
 
     OpenCV's distortion acts on normalised coordinates, so undistorting the
@@ -322,8 +322,6 @@ def undistorted_members(frame_lanes: FrameLanes, family, focal_px, dist, forward
     built from lines undistorted with its own focal length: on a 30 deg FOV
     frame with ``k1 = -0.25`` the blended heights are within 0.1 % of the
     exact ones at anchors 1.5x apart (the distortion itself moves them 1.1 %).
-    ``max_points`` thins each line's support points (None: all of them; thinning to 60-120 points
-    doubled the focal error at a 10 deg field of view, where the vanishing point needs every point).
 
     Parameters
     ----------
@@ -358,8 +356,8 @@ def undistorted_members(frame_lanes: FrameLanes, family, focal_px, dist, forward
     step = np.log(max(float(anchor_ratio), 1.01))
     lo, hi = lf[need].min() - step, lf[need].max() + step
     anchors = np.linspace(lo, hi, max(int(np.ceil((hi - lo) / step)) + 1, 2))
-    fams = [_family_or_none(undistort_frame_lanes(frame_lanes, dist, float(np.exp(a)), max_points=max_points,
-                                                  vp_method="shift", spacing=False), forward_px, lane_width_m)
+    fams = [_family_or_none(undistort_frame_lanes(frame_lanes, dist, float(np.exp(a)), vp_method="shift",
+                                                  spacing=False), forward_px, lane_width_m)
             for a in anchors]
     k = np.clip(np.searchsorted(anchors, lf) - 1, 0, len(anchors) - 2)
     # each anchor family's members on the two intervals it borders, computed once

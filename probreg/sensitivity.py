@@ -40,13 +40,16 @@ from pathlib import Path
 
 import numpy as np
 
+from .camera import fov_from_focal
 from .io.clip import write_json
 from .lanes import line_straightness_px, undistort_frame_lanes
 from .pipeline import RunOptions, run_clip
 
-__all__ = ["DistortionStudy", "corner_shift_px", "distortion_study", "lane_straightness_curve", "parse_k1_list"]
+__all__ = ["DistortionStudy", "corner_shift_px", "distortion_study", "lane_straightness_curve", "parse_k1_list",
+           "plumb_line_summary"]
 
 ANGLES = ("knee_l", "knee_r", "hip_l", "hip_r", "elbow_l", "elbow_r", "trunk_lean")
+ANGLE_STATS = ("mean_deg", "mean_abs_change_deg", "max_abs_change_deg", "mean_band_deg")
 GAIT = ("cadence_spm", "step_length_m", "speed_mps", "contact_time_s", "flight_time_s",
         "peak_knee_flexion_swing_deg", "knee_flexion_touchdown_deg")
 
@@ -84,12 +87,18 @@ def parse_k1_list(text):
         if not tok:
             continue
         try:
-            v = float(tok)
+            vals.append(float(tok))
         except ValueError:
             raise ValueError(f"--k1: {tok!r} is not a number") from None
+    return _checked_k1(vals)
+
+
+def _checked_k1(values):
+    """Sorted unique hypotheses; clear errors for none, NaN or implausible values."""
+    vals = [float(v) for v in values]
+    for v in vals:
         if not math.isfinite(v) or abs(v) >= 1.0:
-            raise ValueError(f"--k1: {tok} is outside (-1, 1); radial coefficients of real lenses are far smaller")
-        vals.append(v)
+            raise ValueError(f"--k1: {v} is outside (-1, 1); radial coefficients of real lenses are far smaller")
     if not vals:
         raise ValueError("--k1: give at least one value, e.g. --k1=-0.1,0,0.1")
     return sorted(set(vals))
@@ -151,30 +160,23 @@ class DistortionStudy:
         return "\n".join(lines) + "\n"
 
 
-def ref_model_lanes(result):
-    """The (distorted) frame lanes a run registered."""
-    return result.model.reg.frame_lanes
-
-
 def _spread(v):
     v = np.asarray(v, float)
     v = v[np.isfinite(v)]
     return float(np.ptp(v)) if len(v) else float("nan")
 
 
+def _focal(cams):
+    """Per-frame focal lengths of CameraArrays, NaN where a frame has no camera."""
+    return np.where(cams.valid, cams.focal_px, np.nan)
+
+
 def _lane_straightness(result, dist):
-    """Median over frames with lanes of the RMS straightness after undistortion under ``dist``
-    with the frame's posterior-median focal length."""
-    model = result.model
-    cams = model.cameras_at(result.height["median"])
-    vals = []
-    for i, fl in enumerate(model.reg.frame_lanes):
-        if not fl.ok or not cams.valid[i] or not np.isfinite(cams.focal_px[i]):
-            continue
-        u = undistort_frame_lanes(fl, dist, float(cams.focal_px[i])) if np.any(dist) else fl
-        vals.append(line_straightness_px(u))
-    vals = np.asarray(vals, float)
-    return (float(np.nanmedian(vals)) if np.isfinite(vals).any() else float("nan")), cams
+    """Straightness of all of a run's frames under its own hypothesis ``dist``, with the frames'
+    posterior-median focal lengths; also returns those cameras."""
+    cams = result.model.cameras_at(result.height["median"])
+    curve = lane_straightness_curve(result.model.reg.frame_lanes, _focal(cams), [dist[0]], dist, max_frames=None)
+    return float(curve[0]), cams
 
 
 def lane_straightness_curve(frame_lanes, focal_px, k1_grid, base_dist=None, max_frames=60):
@@ -183,7 +185,8 @@ def lane_straightness_curve(frame_lanes, focal_px, k1_grid, base_dist=None, max_
     A plumb-line check: lines of the straight are straight, so the ``k1`` that
     leaves them straightest is the one the frames support.  Each frame's lines
     are undistorted with its own focal length (``focal_px``, e.g. the
-    posterior-median cameras'); up to ``max_frames`` frames, evenly spaced, are used.
+    posterior-median cameras'); up to ``max_frames`` frames, evenly spaced, are used
+    (None: all of them).
 
     Returns
     -------
@@ -193,7 +196,7 @@ def lane_straightness_curve(frame_lanes, focal_px, k1_grid, base_dist=None, max_
     base = np.zeros(5) if base_dist is None else np.asarray(base_dist, float).reshape(5)
     focal_px = np.asarray(focal_px, float)
     idx = [i for i, fl in enumerate(frame_lanes) if fl.ok and np.isfinite(focal_px[i])]
-    if len(idx) > max_frames:
+    if max_frames is not None and len(idx) > max_frames:
         idx = [idx[int(j)] for j in np.linspace(0, len(idx) - 1, max_frames).round()]
     out = np.full(len(k1_grid), np.nan)
     for j, k1 in enumerate(k1_grid):
@@ -204,6 +207,26 @@ def lane_straightness_curve(frame_lanes, focal_px, k1_grid, base_dist=None, max_
         vals = np.asarray(vals, float)
         if np.isfinite(vals).any():
             out[j] = float(np.nanmedian(vals))
+    return out
+
+
+def plumb_line_summary(k1_grid, curve):
+    """Where a :func:`lane_straightness_curve` is lowest, and how telling it is.
+
+    Returns a dict with ``k1_grid`` and ``straightness_px`` and, when the curve has a
+    finite value, ``best_k1``, ``best_px``, ``at_edge`` (the minimum is at an end of the
+    grid) and ``range_px`` (max - min; a few hundredths of a px: the lanes hardly constrain
+    the lens).
+
+    >>> plumb_line_summary([-0.2, -0.1, 0.0], [0.3, 0.1, 0.2])["best_k1"]
+    -0.1
+    """
+    grid, curve = np.asarray(k1_grid, float), np.asarray(curve, float)
+    out = {"k1_grid": grid.tolist(), "straightness_px": curve.tolist()}
+    if np.isfinite(curve).any():
+        j = int(np.nanargmin(curve))
+        out.update(best_k1=float(grid[j]), best_px=float(curve[j]), at_edge=bool(j in (0, len(grid) - 1)),
+                   range_px=float(np.nanmax(curve) - np.nanmin(curve)))
     return out
 
 
@@ -237,7 +260,7 @@ def distortion_study(clip_dir, out_dir, k1_values, options: RunOptions = RunOpti
         For an empty or invalid list of hypotheses; errors of :func:`run_clip`
         (missing clip, no lanes, ...) pass through unchanged.
     """
-    ks = parse_k1_list(",".join(str(float(k)) for k in k1_values)) if len(k1_values) else parse_k1_list("")
+    ks = _checked_k1(k1_values)
     base = np.zeros(5) if options.dist is None else np.asarray(options.dist, float).reshape(5)
     if reference_k1 is None:
         reference_k1 = (float(base[0]) if options.dist is not None else 0.0 if any(np.isclose(0.0, ks))
@@ -283,7 +306,7 @@ def distortion_study(clip_dir, out_dir, k1_values, options: RunOptions = RunOpti
             else float("nan"),
             "lane_straightness_px": straight,
             "height_m": dict(res.height),
-            "fov_deg": float(2 * np.degrees(np.arctan((w / 2) / f_med))) if np.isfinite(f_med) else float("nan"),
+            "fov_deg": float(fov_from_focal(f_med, w)),
             "frames_ok": int(cams.valid.sum()),
             "angles": angles, "gait": gait, "result_dir": str(Path(res.out_dir)),
         })
@@ -295,27 +318,18 @@ def distortion_study(clip_dir, out_dir, k1_values, options: RunOptions = RunOpti
     lo, hi = min(ks), max(ks)
     pad = max(0.1 * (hi - lo), 0.02)
     grid = np.linspace(lo - pad, hi + pad, 41)
-    curve = lane_straightness_curve(ref_model_lanes(ref_res), np.where(ref_cams.valid, ref_cams.focal_px, np.nan),
-                                    grid, base)
-    plumb = {"k1_grid": grid.tolist(), "straightness_px": curve.tolist(), "cameras_of_k1": float(k_cam)}
-    if np.isfinite(curve).any():
-        j = int(np.nanargmin(curve))
-        plumb.update(best_k1=float(grid[j]), best_px=float(curve[j]),
-                     at_edge=bool(j in (0, len(grid) - 1)),
-                     range_px=float(np.nanmax(curve) - np.nanmin(curve)))
-    study = DistortionStudy(rows=rows, reference_k1=float(reference_k1), out_dir=out_dir, plumb_line=plumb)
+    curve = lane_straightness_curve(ref_res.model.reg.frame_lanes, _focal(ref_cams), grid, base)
+    plumb = {**plumb_line_summary(grid, curve), "cameras_of_k1": float(k_cam)}
+    study = DistortionStudy(rows=rows, reference_k1=reference_k1, out_dir=out_dir, plumb_line=plumb)
     write_json(out_dir / "sensitivity.json", {"reference_k1": study.reference_k1, "rows": rows,
                                               "plumb_line": plumb})
     with open(out_dir / "sensitivity.csv", "w", newline="") as fh:
         wr = csv.writer(fh)
         wr.writerow(["k1", "corner_shift_px", "lane_straightness_px", "height_m", "height_lo_m", "height_hi_m",
-                     "fov_deg", "frames_ok"] + [f"{n}_{q}" for n in ANGLES for q in
-                                                ("mean_deg", "mean_abs_change_deg", "max_abs_change_deg",
-                                                 "mean_band_deg")])
+                     "fov_deg", "frames_ok"] + [f"{n}_{q}" for n in ANGLES for q in ANGLE_STATS])
         for r in rows:
             wr.writerow([r["k1"], r["corner_shift_px"], r["lane_straightness_px"], r["height_m"]["median"],
                          r["height_m"]["lo"], r["height_m"]["hi"], r["fov_deg"], r["frames_ok"]] +
-                        [r["angles"].get(n, {}).get(q, "") for n in ANGLES for q in
-                         ("mean_deg", "mean_abs_change_deg", "max_abs_change_deg", "mean_band_deg")])
+                        [r["angles"].get(n, {}).get(q, "") for n in ANGLES for q in ANGLE_STATS])
     (out_dir / "sensitivity.md").write_text("# Lens-distortion sensitivity\n\n" + study.to_markdown())
     return study

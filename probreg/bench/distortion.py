@@ -29,7 +29,7 @@ import numpy as np
 from ..io.clip import load_groundtruth
 from ..pipeline import RunOptions, run_clip
 from ..priors import ModelPriors
-from ..sensitivity import distortion_study, lane_straightness_curve
+from ..sensitivity import distortion_study, lane_straightness_curve, plumb_line_summary
 from ..synth import config_from_preset, synthesize, write_clip
 from .common import BenchReport, md_table
 from .posterior import score_result
@@ -79,7 +79,7 @@ def run(args=None):
                     "fov_deg": s["fov_deg"], "lane_straightness_px": r["lane_straightness_px"]}
             fov = float(np.median([c.fov_deg for c in gt.cameras]))
             rep.add(f"## {name}: true k1 = {true[0]:+.3f}, FOV {fov:.1f} deg, athlete "
-                    f"{gt.athlete['stature_m']:.2f} m (prior mean 1.76 m); {len(ks)} runs in {dt:.0f} s\n")
+                    f"{gt.athlete['stature_m']:.2f} m (prior mean 1.76 m); {len(study.rows)} runs in {dt:.0f} s\n")
             rep.add(md_table(["k1 assumed", "corner shift px", "lane straightness px", "knee err deg", "MPJPE cm",
                               "height err %", "location err %", "FOV err deg",
                               "knee change vs true-k1 run deg"], rows, floatfmt="{:.3f}"))
@@ -110,7 +110,7 @@ def run(args=None):
                     grid = np.asarray(p["k1_grid"])
                     curve = lane_straightness_curve(res.model.reg.frame_lanes,
                                                     np.where(cams.valid, cams.focal_px, np.nan), grid, true)
-                    k_pl = float(grid[int(np.nanargmin(curve))])
+                    k_pl = plumb_line_summary(grid, curve)["best_k1"]
                     numbers[name]["plumb_line_k1_stature_known"] = k_pl
             rep.add(f"With the athlete's stature known ({st:.2f} m, sd 2 cm):\n")
             rep.add(md_table(["k1 assumed", "knee err deg", "MPJPE cm", "height err %", "location err %",
