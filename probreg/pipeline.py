@@ -6,8 +6,9 @@ Writes the result layout of ``CLIP_FORMAT.md``: ``angles.csv``, ``joints3d.npz``
 this frame, camera interpolated from its neighbours); ``bridged_inconsistent`` (lanes found
 but their family leaves the clip's zoom path, so it is treated like a frame without lanes);
 ``bridged_no_member`` (lanes found, but their family has no member at the clip's camera
-height, e.g. a misdetected line; bridged likewise); ``no_member`` (the same, at the clip's
-start or end, where there is nothing to bridge from: no camera); otherwise the lane status of the frame, e.g. ``too_few_lines``, ``no_straight``).
+height, e.g. a misdetected line; bridged likewise); ``inconsistent`` and ``no_member`` (the
+same two cases at the clip's start or end, where there is nothing to bridge from: no camera);
+otherwise the lane status of the frame, e.g. ``too_few_lines``, ``no_straight``).
 """
 
 from __future__ import annotations
@@ -117,7 +118,9 @@ def _diagnostics(sampler, tau, idata):
 def _frame_status(lanes, camera, inconsistent, gap_distance):
     """The ``run.json`` status of one frame (see the module docstring)."""
     if camera is None:
-        return "no_member" if lanes.ok else lanes.status
+        if not lanes.ok:
+            return lanes.status
+        return "inconsistent" if inconsistent else "no_member"
     if inconsistent:
         return "bridged_inconsistent"
     if not lanes.ok:

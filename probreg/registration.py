@@ -285,16 +285,41 @@ def _settle_offsets(offsets, members, lane_width_m, half_window=12):
 
 
 def _zoom_outliers(cameras, half_window=12, rel_tol=0.02, n_sigma=6.0):
-    """Frames whose focal length leaves the clip's smooth zoom path (running median).
+    """Frames whose focal length leaves the clip's smooth zoom path.
+
+    The path is the running median of the log focal lengths over the
+    ``2 half_window + 1`` neighbouring frames with a member, which follows a
+    steady zoom as long as the window is symmetric.  Within ``half_window`` of
+    the clip's ends the window is one-sided and its median lags a zooming
+    camera -- or the fast focal drift of a height near the family's turning
+    point -- so there the path is a robust local line (Theil-Sen slope, median
+    offset) through the same frames.
 
     ``cameras``: Camera or family members (anything with ``focal_px``) or None per frame.
+
+    >>> class C: pass
+    >>> cams = []
+    >>> for i in range(40):  # a steady 1 % zoom per frame, one glitch
+    ...     c = C(); c.focal_px = 2000 * 1.01 ** i * (1.1 if i == 30 else 1.0); cams.append(c)
+    >>> _zoom_outliers(cams)
+    [30]
     """
     f = np.array([np.log(c.focal_px) if c is not None else np.nan for c in cameras])
     ok = np.flatnonzero(np.isfinite(f))
     if len(ok) < 5:
         return []
-    med = np.array([np.median(f[ok[max(0, j - half_window):j + half_window + 1]]) for j in range(len(ok))])
-    res = f[ok] - med
+    t, y = ok.astype(float), f[ok]
+    path = np.empty(len(ok))
+    for j in range(len(ok)):
+        w = slice(max(0, j - half_window), j + half_window + 1)
+        tw, yw = t[w], y[w]
+        if j - half_window >= 0 and j + half_window < len(ok):
+            path[j] = np.median(yw)
+            continue
+        a, b = np.triu_indices(len(tw), 1)
+        slope = np.median((yw[b] - yw[a]) / (tw[b] - tw[a]))
+        path[j] = np.median(yw - slope * (tw - t[j]))
+    res = y - path
     sigma = 1.4826 * np.median(np.abs(res))
     bad = np.abs(res) > max(n_sigma * sigma, np.log1p(rel_tol))
     return [int(i) for i in ok[bad]]

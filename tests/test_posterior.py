@@ -195,3 +195,4 @@ def test_frame_status_says_how_each_camera_came_about():
     assert _frame_status(none, cam, False, 2) == "bridged"
     assert _frame_status(none, None, False, 0) == "no_lines"
     assert _frame_status(ok, None, False, 0) == "no_member"
+    assert _frame_status(ok, None, True, 0) == "inconsistent"  # off the zoom path at the clip's end

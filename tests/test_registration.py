@@ -154,6 +154,22 @@ def test_glitch_frames_are_off_the_zoom_path_at_every_height(small_clip):
     assert reg.glitch_frames() == [10, 25, 50]
 
 
+def test_zoom_path_follows_a_zoom_to_the_clips_ends():
+    """A camera zooming steadily (or a height near the family's turning point, where the
+    focal length drifts fast) is on its path in every frame, the clip's first and last
+    frames included; a frame 5 % off that path is singled out wherever it lies."""
+    from types import SimpleNamespace
+
+    from probreg.registration import _zoom_outliers
+
+    f = 3000.0 * np.exp(0.01 * np.arange(80)) * (1 + 0.001 * np.sin(np.arange(80)))
+    assert _zoom_outliers([SimpleNamespace(focal_px=v) for v in f]) == []
+    for bad in (0, 3, 40, 79):
+        g = f.copy()
+        g[bad] *= 1.05
+        assert _zoom_outliers([SimpleNamespace(focal_px=v) for v in g]) == [bad]
+
+
 def test_distortion_aware_family_recovers_the_camera(distorted_lanes):
     """Lines bent by a wide lens: the family of the distorted lines misses the true camera
     by percents; undistorting with every member's own focal length recovers it."""
