@@ -888,6 +888,14 @@ def _pencil_from_candidates(cands, fl, cfg):
     v_unit, cov, sigma = _refine_vp(sets, _to_unit(vp, size), size)
     lines_px, res = lines_through_point(sets, v_unit, size)
     coord = _pencil_coordinate(lines_px, v_unit, size)
+    joined = _join_pieces(sets, lines_px, coord)
+    if len(joined) < len(sets):
+        sets = joined
+        if len(sets) < cfg.min_lines:
+            return replace(fl, status="too_few_lines")
+        v_unit, cov, sigma = _refine_vp(sets, v_unit, size)
+        lines_px, res = lines_through_point(sets, v_unit, size)
+        coord = _pencil_coordinate(lines_px, v_unit, size)
     order = np.argsort(coord)
     # canonical direction (the sign of the homogeneous vanishing point is arbitrary, so the
     # angular order may run either way): the first line is the one nearer the image top
@@ -906,6 +914,52 @@ def _pencil_from_candidates(cands, fl, cfg):
                   else float("nan"))
     return replace(fl, status="ok", lines=lanes, vanishing_point=_from_unit(v_unit, size), vp_cov=cov,
                    spacing_residual_px=spacing_px, extra={"vp_unit": v_unit, "vp_sigma_px": sigma})
+
+
+def _join_pieces(sets, lines_px, coord, max_frac=0.2, max_overlap=0.5):
+    """Support-point sets of the pencil with the pieces of one lane line joined.
+
+    A lane line bent by a distorting lens (or partly hidden) can reach the pencil as
+    two straight pieces, one after the other along the line.  Their pencil
+    coordinates nearly coincide (within ``max_frac`` of the typical spacing of
+    neighbouring lines) while distinct lane lines are a whole spacing apart; a kerb
+    or a second line close beside a lane line runs alongside it instead, so pieces
+    whose extents along the line overlap by more than ``max_overlap`` of the shorter
+    one are not joined.
+
+    >>> pts = lambda y0, x0, x1: np.column_stack([np.arange(x0, x1, 10.0), y0 + 0.1 * np.arange(x0, x1, 10.0)])
+    >>> sets = [pts(100, 0, 1000), pts(200, 0, 500), pts(200.4, 500, 1000), pts(300, 0, 1000)]
+    >>> lines = np.array([[-0.1, 1, -y] for y in (100, 200, 200.4, 300)]) / np.hypot(0.1, 1)
+    >>> [len(p) for p in _join_pieces(sets, lines, np.array([0.0, 1.0, 1.004, 2.0]))]
+    [100, 100, 100]
+    """
+    n = len(sets)
+    if n < 3:
+        return sets
+    order = np.argsort(coord)
+    gaps = np.diff(np.asarray(coord, float)[order])
+    big = gaps[gaps > 0.25 * np.median(gaps)]
+    if not len(big):
+        return sets
+    tol = max_frac * float(np.median(big))
+    groups = [[order[0]]]
+    for k, g in zip(order[1:], gaps):
+        if g < tol and all(_overlap(sets[k], sets[j], lines_px[j]) <= max_overlap for j in groups[-1]):
+            groups[-1].append(k)
+        else:
+            groups.append([k])
+    if len(groups) == n:
+        return sets
+    return [np.concatenate([sets[j] for j in grp]) if len(grp) > 1 else sets[grp[0]] for grp in groups]
+
+
+def _overlap(pts_a, pts_b, line):
+    """Overlap of two point sets' extents along ``line``, as a fraction of the shorter extent."""
+    d = np.array([-line[1], line[0]])
+    ta, tb = pts_a @ d, pts_b @ d
+    inter = min(ta.max(), tb.max()) - max(ta.min(), tb.min())
+    shorter = max(min(np.ptp(ta), np.ptp(tb)), 1e-9)
+    return max(inter, 0.0) / shorter
 
 
 def _spacing_residual_px(lanes, coord, idx, vp_unit, image_size):

@@ -162,3 +162,25 @@ def test_smoothing_gates_an_outlier_vanishing_point():
     assert _vp_dir(cams[bad], sm[bad].vanishing_point) < 0.05
     no_gate = smooth_vanishing_points(fls, gate_chi2=None)
     assert _vp_dir(cams[bad], no_gate[bad].vanishing_point) > 2 * _vp_dir(cams[bad], sm[bad].vanishing_point)
+
+
+@pytest.mark.parametrize("target", [(21.2, -8.3, 1.9), (18.0, -6.0, 0.5)])
+def test_lines_bent_by_a_strong_lens_are_found_once_each(target):
+    """A 30 deg lens with k1 = -0.25 (26 px at the image corner) bends the lane lines near
+    the image edge; the Hough transform breaks such a line into two straight pieces, which
+    must reach the pencil as one lane line (not two lines a fraction of a spacing apart)."""
+    from probreg.camera import undistort_normalized
+
+    cam = Camera.look_at([34.3, -28.9, 6.9], target, fov_deg=30.0, dist=(-0.25, 0, 0, 0, 0))
+    fl = detect_lanes(_render(cam, np.random.default_rng(3)))
+    assert fl.status == "ok"
+    ideal, K = cam.with_(dist=np.zeros(5)), cam.K
+    true = [_true_line(ideal, i) for i in range(9)]
+    matched = []
+    for ln in fl.lines:
+        pts = undistort_normalized((ln.points_px - K[:2, 2]) / K[0, 0], cam.dist) * K[0, 0] + K[:2, 2]
+        d = [np.median(np.abs(pts @ t[:2] + t[2])) for t in true]
+        assert min(d) < 0.2
+        matched.append(int(np.argmin(d)))
+    assert sorted(matched) == list(range(9))
+    assert list(fl.indices) == list(range(9))
