@@ -45,7 +45,8 @@ from .filtering import clean_keypoints, noise_model, score_noise_scale, stride_l
 from .kinematics import gait_summary
 from .lifting import CameraArrays, LiftConfig, estimate_segments, lift
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
-from .registration import ClipRegistration, _zoom_outliers, athlete_ground_track, lane_anchor_shift
+from .registration import (ClipRegistration, _zoom_outliers, athlete_ground_track, glitch_vote,
+                           lane_anchor_shift)
 from .skeleton import ANGLE_NAMES, JOINT_INDEX
 from .trajectory import fit_ground_track
 
@@ -217,6 +218,7 @@ class ClipModel:
             lo, hi = min(lo, np.nanmin(seg)), max(hi, np.nanmax(seg))
         self.height_range = (lo, hi)
         self.valid_lanes = self.valid.copy()
+        self._glitches = None
 
     def _members(self, i, fam, fgrid):
         """Members of frame ``i``'s family at the focal lengths ``fgrid`` (lines undistorted
@@ -229,6 +231,34 @@ class ClipModel:
         return undistorted_members(self.reg.frame_lanes[i], fam, fgrid, self.dist, self.reg.forward_px,
                                    self.reg.lane_width_m, height_window=(lo / 1.5, hi * 1.5))
 
+    def _member_at(self, i, height_m):
+        """Grid members of frame ``i``'s branch that bracket ``height_m``: ``(ia, ib, t)`` to
+        interpolate linearly (``t`` from ``ia`` to ``ib``), or None when out of its reach."""
+        hh = self.h[i]
+        ok = np.isfinite(hh)
+        if ok.sum() < 2:
+            return None
+        hv = hh[ok]
+        order = np.argsort(hv)
+        hs = hv[order]
+        if not hs[0] <= height_m <= hs[-1]:
+            return None
+        j = int(np.clip(np.searchsorted(hs, height_m), 1, len(hs) - 1))
+        a, b = order[j - 1], order[j]
+        t = (height_m - hv[a]) / (hv[b] - hv[a]) if hv[b] != hv[a] else 0.0
+        idx = np.flatnonzero(ok)
+        return idx[a], idx[b], t
+
+    def _focal_at(self, height_m):
+        """(F,) focal length of every frame's own member at ``height_m`` (NaN: none)."""
+        out = np.full(self.F, np.nan)
+        for i in np.flatnonzero(self.valid_lanes):
+            at = self._member_at(i, height_m)
+            if at is not None:
+                ia, ib, t = at
+                out[i] = np.exp(self.logf[i, ia] + t * (self.logf[i, ib] - self.logf[i, ia]))
+        return out
+
     def cameras_at(self, height_m, offsets=None):
         """Per-frame cameras of the family member at ``height_m`` as CameraArrays."""
         F = self.F
@@ -237,19 +267,11 @@ class ClipModel:
         y = np.full(F, np.nan)
         R = np.full((F, 3, 3), np.nan)
         for i in np.flatnonzero(self.valid):
-            hh = self.h[i]
-            ok = np.isfinite(hh)
-            hv, lf = hh[ok], self.logf[i, ok]
-            order = np.argsort(hv)
-            hs = hv[order]
-            if not hs[0] <= height_m <= hs[-1]:
+            at = self._member_at(i, height_m)
+            if at is None:
                 valid[i] = False
                 continue
-            j = int(np.clip(np.searchsorted(hs, height_m), 1, len(hs) - 1))
-            a, b = order[j - 1], order[j]
-            t = (height_m - hv[a]) / (hv[b] - hv[a]) if hv[b] != hv[a] else 0.0
-            idx = np.flatnonzero(ok)
-            ia, ib = idx[a], idx[b]
+            ia, ib, t = at
             f[i] = np.exp(self.logf[i, ia] + t * (self.logf[i, ib] - self.logf[i, ia]))
             y[i] = self.y[i, ia] + t * (self.y[i, ib] - self.y[i, ia])
             Rm = self.R[i, ia] + t * (self.R[i, ib] - self.R[i, ia])
@@ -292,9 +314,12 @@ class ClipModel:
         # consistent)
         self.valid = self.valid_lanes.copy()
         self.inconsistent[:] = False
-        odd = set(reg.glitch_frames())
+        # judged on the model's own families (with a lens, those of the undistorted lines)
+        if self._glitches is None:
+            self._glitches = glitch_vote(self._focal_at, self.valid_lanes)
+        odd = set(self._glitches)
         if final:
-            odd |= set(_zoom_outliers(seq.members_at_height(self.h_ref)))
+            odd |= set(_zoom_outliers(self._focal_at(self.h_ref)))
         odd = sorted(i for i in odd if self.valid[i])
         if odd and len(odd) < self.valid.sum() - 2:
             self.valid[odd] = False

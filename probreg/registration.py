@@ -95,6 +95,10 @@ def running_sign(cameras, keypoints_px):
     return int(np.sign(slope))
 
 
+#: Camera heights (m) at which :func:`glitch_vote` asks whether a frame is off the zoom path.
+GLITCH_HEIGHTS = tuple(np.geomspace(2.0, 60.0, 7))
+
+
 @dataclass
 class ClipRegistration:
     """Lanes and calibration families of every frame of a clip."""
@@ -186,30 +190,17 @@ class ClipRegistration:
                 offsets[t] = int(np.round((members[t].y_m - y_ref) / self.lane_width_m))
         return _settle_offsets(offsets, trusted, self.lane_width_m)
 
-    def glitch_frames(self, heights=tuple(np.geomspace(2.0, 60.0, 7)), min_share=0.8):
+    def glitch_frames(self, heights=GLITCH_HEIGHTS, min_share=0.8):
         """Frames whose lane family leaves the clip's smooth zoom path at *every* camera height
-        (cached).  At a wrong height the focal length of a correct family also wanders, so
-        a frame singled out at one height only says little; a spurious or misplaced line makes
-        its frame an outlier whichever height is true.  Heights at which fewer than
-        ``min_share`` of the frames with lanes have a member do not vote; at the others a frame
-        with lanes but without a member counts as off the path."""
+        (cached; :func:`glitch_vote` on the families of the detected lines)."""
         if getattr(self, "_glitches", None) is not None:
             return self._glitches
         seq = self.sequence
-        n_fam = sum(f is not None for f in seq.families)
-        common, votes = None, 0
-        for h in heights:
-            members = seq.members_at_height(float(h))
-            if sum(m is not None for m in members) >= max(min_share * n_fam, 5):
-                # a frame with lanes but no member at a height most frames reach is as odd as
-                # one off the zoom path there (its family does not fit the clip's camera)
-                odd = set(_zoom_outliers(members)) | {t for t, (fam, m) in enumerate(zip(seq.families, members))
-                                                      if fam is not None and m is None}
-                common = odd if common is None else common & odd
-                votes += 1
-                if votes >= 2 and not common:  # an intersection only shrinks
-                    break
-        self._glitches = sorted(common) if votes >= 2 else []
+
+        def focal_at(h):
+            return np.array([m.focal_px if m is not None else np.nan for m in seq.members_at_height(float(h))])
+
+        self._glitches = glitch_vote(focal_at, np.array([f is not None for f in seq.families]), heights, min_share)
         return self._glitches
 
     def _offsets_pass(self, seq, members):
@@ -284,6 +275,40 @@ def _settle_offsets(offsets, members, lane_width_m, half_window=12):
     return offsets
 
 
+def glitch_vote(focal_at, present, heights=GLITCH_HEIGHTS, min_share=0.8):
+    """Frames whose family leaves the clip's smooth zoom path at *every* camera height.
+
+    At a wrong height the focal length of a correct family also wanders, so a frame
+    singled out at one height only says little; a spurious or misplaced line makes its
+    frame an outlier whichever height is true.  Heights at which fewer than
+    ``min_share`` of the frames with a family have a member do not vote; at the others
+    a frame with a family but without a member counts as off the path.
+
+    Parameters
+    ----------
+    focal_at : callable
+        ``focal_at(h)`` -> (F,) focal length of each frame's member at height ``h``
+        (NaN: no member).
+    present : ndarray of bool (F,)
+        Frames with a family.
+    """
+    present = np.asarray(present, bool)
+    n_fam = int(present.sum())
+    common, votes = None, 0
+    for h in heights:
+        f = np.asarray(focal_at(float(h)), float)
+        has = np.isfinite(f)
+        if has.sum() >= max(min_share * n_fam, 5):
+            # a frame with lanes but no member at a height most frames reach is as odd as
+            # one off the zoom path there (its family does not fit the clip's camera)
+            odd = set(_zoom_outliers(f)) | {int(t) for t in np.flatnonzero(present & ~has)}
+            common = odd if common is None else common & odd
+            votes += 1
+            if votes >= 2 and not common:  # an intersection only shrinks
+                break
+    return sorted(common) if votes >= 2 else []
+
+
 def _zoom_outliers(cameras, half_window=12, rel_tol=0.02, n_sigma=6.0):
     """Frames whose focal length leaves the clip's smooth zoom path.
 
@@ -295,7 +320,8 @@ def _zoom_outliers(cameras, half_window=12, rel_tol=0.02, n_sigma=6.0):
     point -- so there the path is a robust local line (Theil-Sen slope, median
     offset) through the same frames.
 
-    ``cameras``: Camera or family members (anything with ``focal_px``) or None per frame.
+    ``cameras``: Camera or family members (anything with ``focal_px``) or None per frame,
+    or an array of focal lengths (NaN: none).
 
     >>> class C: pass
     >>> cams = []
@@ -304,7 +330,11 @@ def _zoom_outliers(cameras, half_window=12, rel_tol=0.02, n_sigma=6.0):
     >>> _zoom_outliers(cams)
     [30]
     """
-    f = np.array([np.log(c.focal_px) if c is not None else np.nan for c in cameras])
+    if isinstance(cameras, np.ndarray) and cameras.dtype.kind == "f":
+        with np.errstate(invalid="ignore", divide="ignore"):
+            f = np.log(cameras)
+    else:
+        f = np.array([np.log(c.focal_px) if c is not None else np.nan for c in cameras])
     ok = np.flatnonzero(np.isfinite(f))
     if len(ok) < 5:
         return []
@@ -381,8 +411,7 @@ def undistorted_members(frame_lanes: FrameLanes, family, focal_px, dist, forward
     step = np.log(max(float(anchor_ratio), 1.01))
     lo, hi = lf[need].min() - step, lf[need].max() + step
     anchors = np.linspace(lo, hi, max(int(np.ceil((hi - lo) / step)) + 1, 2))
-    fams = [_family_or_none(undistort_frame_lanes(frame_lanes, dist, float(np.exp(a)), vp_method="shift",
-                                                  spacing=False), forward_px, lane_width_m)
+    fams = [_family_or_none(undistort_frame_lanes(frame_lanes, dist, float(np.exp(a)), spacing=False), forward_px, lane_width_m)
             for a in anchors]
     k = np.clip(np.searchsorted(anchors, lf) - 1, 0, len(anchors) - 2)
     # each anchor family's members on the two intervals it borders, computed once
