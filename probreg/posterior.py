@@ -229,7 +229,8 @@ class ClipModel:
 
         lo, hi = self.priors.camera_height.interval(0.998)
         return undistorted_members(self.reg.frame_lanes[i], fam, fgrid, self.dist, self.reg.forward_px,
-                                   self.reg.lane_width_m, height_window=(lo / 1.5, hi * 1.5))
+                                   self.reg.lane_width_m, height_window=(lo / 1.5, hi * 1.5),
+                                   branch=self.branch)
 
     def _member_at(self, i, height_m):
         """Grid members of frame ``i``'s branch that bracket ``height_m``: ``(ia, ib, t)`` to

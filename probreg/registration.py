@@ -14,7 +14,7 @@ from dataclasses import dataclass, replace
 import numpy as np
 
 from .calibration import CalibrationError, CalibrationFamily, SequenceCalibration
-from .camera import Camera
+from .camera import Camera, distort_normalized
 from .io.clip import Clip
 from .io.frames import iter_frames
 from .lanes import FrameLanes, LaneDetectorConfig, smooth_vanishing_points, track_lanes, undistort_frame_lanes
@@ -365,7 +365,8 @@ def _family_or_none(fl: FrameLanes, forward_px, lane_width_m):
 
 
 def undistorted_members(frame_lanes: FrameLanes, family, focal_px, dist, forward_px=(1.0, 0.0),
-                        lane_width_m=1.22, anchor_ratio=1.5, height_window=None):
+                        lane_width_m=1.22, anchor_ratio=1.5, height_window=None, branch=None,
+                        min_shift_px=0.02):
     """Family members at ``focal_px`` for lines seen through a distorting lens.
 
     OpenCV's distortion acts on normalised coordinates, so undistorting the
@@ -390,6 +391,13 @@ def undistorted_members(frame_lanes: FrameLanes, family, focal_px, dist, forward
     height_window : (float, float) or None
         Only members whose distorted-family height lies in this range are
         computed (the others are returned invalid); saves anchors.
+    branch : {"narrow", "wide", None}
+        Only members of this branch (longer / shorter focal lengths than the
+        family's highest member, with one anchor step of margin) are computed.
+    min_shift_px : float
+        Where the lens moves no support point by more than this (long focal
+        lengths: the shift falls as ``1 / f**2``), the members of the distorted
+        lines are returned as they are; no anchors are spent there.
 
     Returns
     -------
@@ -405,10 +413,24 @@ def undistorted_members(frame_lanes: FrameLanes, family, focal_px, dist, forward
     if height_window is not None:
         with np.errstate(invalid="ignore"):
             need &= (m0["height_m"] >= height_window[0]) & (m0["height_m"] <= height_window[1])
-    if not need.any():
-        return out
     lf = np.log(fgrid)
     step = np.log(max(float(anchor_ratio), 1.01))
+    if branch is not None and need.any():
+        top = lf[int(np.nanargmax(np.where(m0["valid"], m0["height_m"], np.nan)))]
+        need &= (lf >= top - step) if branch == "narrow" else (lf <= top + step)
+    # members the lens leaves as they are: no support point moves by min_shift_px
+    r = max(float(np.max(np.linalg.norm(ln.points_px - family.principal_point, axis=1)))
+            for ln in frame_lanes.lines)
+    dirs = r * np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0], [0.7071, 0.7071], [-0.7071, 0.7071]])
+    xn = (dirs[None] / fgrid[:, None, None]).reshape(-1, 2)
+    moved = (distort_normalized(xn, dist) - xn).reshape(len(fgrid), len(dirs), 2) * fgrid[:, None, None]
+    shift = np.linalg.norm(moved, axis=-1).max(-1)
+    plain = need & (shift < min_shift_px)
+    for key in out:
+        out[key][plain] = m0[key][plain]
+    need &= ~plain
+    if not need.any():
+        return out
     lo, hi = lf[need].min() - step, lf[need].max() + step
     anchors = np.linspace(lo, hi, max(int(np.ceil((hi - lo) / step)) + 1, 2))
     fams = [_family_or_none(undistort_frame_lanes(frame_lanes, dist, float(np.exp(a)), spacing=False), forward_px, lane_width_m)

@@ -192,3 +192,17 @@ def test_distortion_aware_family_recovers_the_camera(distorted_lanes):
     assert np.allclose(good["R"][0], cam.R, atol=2e-3)
     # the lateral position relative to line index 0 (lane line 1, y = -1.22)
     assert abs(good["y_m"][0] - (cam.C[1] + 1.22)) < 0.02 * abs(cam.C[1])
+    # on a whole focal grid: the narrow branch alone gives the same members there, and at
+    # focal lengths so long that the lens moves no point by 0.02 px, the bent lines' members
+    # are the members
+    grid = cam.focal_px * np.geomspace(0.5, 2000.0, 60)
+    full = undistorted_members(fl, fam, grid, dist, forward_px=fwd / np.linalg.norm(fwd))
+    narrow = undistorted_members(fl, fam, grid, dist, forward_px=fwd / np.linalg.norm(fwd), branch="narrow")
+    top = int(np.nanargmax(np.where(full["valid"], full["height_m"], np.nan)))
+    both = narrow["valid"][top:] & full["valid"][top:]
+    assert both.mean() > 0.9
+    assert np.allclose(narrow["height_m"][top:][both], full["height_m"][top:][both])
+    assert not narrow["valid"][: max(top - 5, 0)].any()
+    far = grid > 200 * cam.focal_px  # the corner moves by < 0.001 px
+    plain = fam.members(grid[far])
+    assert np.array_equal(full["height_m"][far], plain["height_m"])
