@@ -34,6 +34,7 @@ def run(args=None):
     rep = BenchReport("band-calibration", "Band calibration on held-out synthetic clips")
     rep.add(__doc__.split("\n\n", 1)[1])
     z_all, rows = [], []
+    z_other = {"hip": [], "elbow": []}  # the same ratio for the other limb angles
     with tempfile.TemporaryDirectory() as tmp:
         for preset, seed in HELD_OUT:
             clip_dir = Path(tmp) / f"{preset}_{seed}"
@@ -46,20 +47,31 @@ def run(args=None):
                      log=lambda *a: None)
             ang = read_angles_csv(Path(tmp) / "out" / "angles.csv")
             truth = joint_angles(gt.joints3d_track_m)
-            zs = []
-            for k in ("knee_l", "knee_r"):
-                f, med, lo, hi = ang[k]
-                t = truth[k][f.astype(int)]
-                with np.errstate(invalid="ignore", divide="ignore"):
-                    z = np.where(t >= med, (t - med) / (hi - med), (med - t) / (med - lo))
-                zs.append(z[np.isfinite(z)])
-            z = np.concatenate(zs)
+            def ratios(joint):
+                zs = []
+                for k in (f"{joint}_l", f"{joint}_r"):
+                    f, med, lo, hi = ang[k]
+                    t = truth[k][f.astype(int)]
+                    with np.errstate(invalid="ignore", divide="ignore"):
+                        z = np.where(t >= med, (t - med) / (hi - med), (med - t) / (med - lo))
+                    zs.append(z[np.isfinite(z)])
+                return np.concatenate(zs)
+
+            z = ratios("knee")
             z_all.append(z)
-            rows.append([f"{preset} (seed {seed})", 100 * np.mean(z <= 1.0), float(np.percentile(z, 90))])
+            for joint in z_other:
+                z_other[joint].append(ratios(joint))
+            rows.append([f"{preset} (seed {seed})", 100 * np.mean(z <= 1.0), float(np.percentile(z, 90)),
+                         *[float(np.percentile(z_other[j][-1], 90)) for j in z_other]])
     z = np.concatenate(z_all)
     k90 = float(np.percentile(z, 90))
-    rep.add(md_table(["clip", "coverage of the raw bootstrap band %", "90th percentile of |error| / half-band"], rows))
+    rep.add(md_table(["clip", "knee: coverage of the raw bootstrap band %",
+                      "knee: 90th percentile of abs. error / half-band", "hip: same", "elbow: same"], rows))
     rep.add(f"Over all {len(z)} knee-frames: raw coverage {100 * np.mean(z <= 1):.1f} %; the inflation that "
             f"gives 90 % coverage is **{k90:.2f}**.\n")
+    for joint, zs in z_other.items():
+        zj = np.concatenate(zs)
+        rep.add(f"{joint.capitalize()} angles with the knee's factor: {100 * np.mean(zj <= k90):.1f} % inside "
+                f"(their own 90 % factor would be {np.percentile(zj, 90):.2f}).\n")
     rep.numbers["inflation"] = k90
     return rep

@@ -11,6 +11,8 @@ known (prior sd 2 cm), as a sports scientist who measured the athlete would.
 * calibration: the fraction of frames whose true knee angle lies inside the
   90 % band (target 85-95 %), and of clips whose 90 % camera-height interval
   contains the true height (target ~9 in 10);
+* the same error and band coverage for the hip and elbow angles (no target in
+  the issue; reported because users read them too);
 * time of the whole run per 250-frame clip (2 cores).
 """
 
@@ -40,14 +42,17 @@ def score_result(clip_dir, out_dir):
     gt = load_groundtruth(clip_dir)
     ang = read_angles_csv(Path(out_dir) / "angles.csv")
     truth = joint_angles(gt.joints3d_track_m)
-    knee_err, inside = [], []
-    for k in ("knee_l", "knee_r"):
-        frames, med, lo, hi = ang[k]
-        t = truth[k][frames.astype(int)]
-        ok = np.isfinite(med)
-        knee_err.append(np.abs(med[ok] - t[ok]))
-        inside.append((t[ok] >= lo[ok]) & (t[ok] <= hi[ok]))
-    knee_err, inside = np.concatenate(knee_err), np.concatenate(inside)
+    angle_scores = {}
+    for joint in ("knee", "hip", "elbow"):
+        err, within = [], []
+        for k in (f"{joint}_l", f"{joint}_r"):
+            frames, med, lo, hi = ang[k]
+            t = truth[k][frames.astype(int)]
+            ok = np.isfinite(med) & np.isfinite(t)
+            err.append(np.abs(med[ok] - t[ok]))
+            within.append((t[ok] >= lo[ok]) & (t[ok] <= hi[ok]))
+        angle_scores[joint] = (np.concatenate(err), np.concatenate(within))
+    knee_err, inside = angle_scores["knee"]
     j = np.load(Path(out_dir) / "joints3d.npz")["median"]
     rel = j - j[:, JOINT_INDEX["pelvis"]][:, None]
     trel = gt.joints3d_track_m - gt.joints3d_track_m[:, JOINT_INDEX["pelvis"]][:, None]
@@ -73,6 +78,8 @@ def score_result(clip_dir, out_dir):
         "loc_pct": float(np.mean(loc)) if loc else float("nan"),
         "fov_deg": float(np.mean(fov)) if fov else float("nan"),
         "knee_coverage": float(np.mean(inside)), "n_frames": int(len(inside) // 2),
+        **{f"{j}_deg": float(np.mean(angle_scores[j][0])) for j in ("hip", "elbow")},
+        **{f"{j}_coverage": float(np.mean(angle_scores[j][1])) for j in ("hip", "elbow")},
         "h_true": h_true, "h_med": h["median"], "h_lo": h["lo"], "h_hi": h["hi"],
     }
 
@@ -109,6 +116,11 @@ def run(args=None):
             rep.add(md_table(["clip", "preset", "knee err deg", "knee in 90 % band %", "MPJPE cm",
                               "height err %", "height median [90 %] (true) m", "location err %",
                               "FOV err deg", "time s"], table))
+            rep.add(f"### {variant}: hip and elbow angles\n")
+            rep.add(md_table(["clip", "hip err deg", "hip in 90 % band %", "elbow err deg",
+                              "elbow in 90 % band %"],
+                             [[n, s["hip_deg"], 100 * s["hip_coverage"], s["elbow_deg"],
+                               100 * s["elbow_coverage"]] for n, _, s in rows]))
             S = [s for _, _, s in rows]
             summ = {
                 "knee_deg": np.mean([s["knee_deg"] for s in S]),
@@ -119,6 +131,8 @@ def run(args=None):
                 "loc_pct": np.nanmean([s["loc_pct"] for s in S]),
                 "fov_deg": np.nanmean([s["fov_deg"] for s in S]),
                 "time_s": np.median([s["time_s"] for s in S]),
+                **{key: np.mean([s[key] for s in S]) for key in ("hip_deg", "hip_coverage", "elbow_deg",
+                                                                  "elbow_coverage")},
             }
             rep.numbers[variant] = summ
             n = len(S)
@@ -139,6 +153,9 @@ def run(args=None):
             rep.add(f"### {variant}: targets\n")
             rep.add(md_table(["quantity", "target", "measured", "met"],
                              [[a, b, c, "yes" if d else "**no**"] for a, b, c, d in checks]))
+            rep.add(f"Without a target: hip-angle error {summ['hip_deg']:.2f} deg, "
+                    f"{100 * summ['hip_coverage']:.1f} % inside the band; elbow-angle error "
+                    f"{summ['elbow_deg']:.2f} deg, {100 * summ['elbow_coverage']:.1f} % inside the band.\n")
     finally:
         if tmp is not None:
             tmp.cleanup()
