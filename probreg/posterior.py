@@ -199,10 +199,18 @@ class ClipModel:
         from .camera import focal_from_fov
 
         fgrid = np.geomspace(focal_from_fov(150.0, w), focal_from_fov(0.3, w), n)
-        for i, fam in enumerate(fams):
-            if fam is None:
-                continue
-            m = self._members(i, fam, fgrid)
+        frames = [i for i, fam in enumerate(fams) if fam is not None]
+        if self.dist is not None and np.any(self.dist):
+            # every member undistorts the frame's lines anew (~1 ms each): frames go to the cores
+            k = max(1, min(_default_workers(), len(frames)))
+            parts = _fork_map(lambda idx: {i: self._members(i, fams[i], fgrid) for i in idx},
+                              [frames[j::k] for j in range(k)])
+            members = {i: m for part in parts for i, m in part.items()}
+        else:
+            members = {i: self._members(i, fams[i], fgrid) for i in frames}
+        for i in frames:
+            fam = fams[i]
+            m = members[i]
             ok = m["valid"] & np.isfinite(m["height_m"])
             if ok.sum() < 3:
                 self.valid[i] = False
@@ -537,9 +545,6 @@ class ClipModel:
             ``joints_point``, ``angles_point`` without; ``gait`` {name: (S,)} from the
             point liftings.
         """
-        import multiprocessing as mp
-        import os
-
         t0 = time.perf_counter()
         S = len(draws)
         cross = config.cross_stride_angles
@@ -549,22 +554,9 @@ class ClipModel:
         seeds = rng.integers(0, 2**63 - 1, size=S)
         with_noise = bootstrap_noise and np.isfinite(self.noise_sd) and self.noise_sd > 0
         job = (draws, L, seeds, cfg, with_noise, self._joint_noise_scale() if with_noise else None)
-        workers = min(os.cpu_count() or 1, 4) if workers is None else int(workers)
-        workers = max(1, min(workers, S))
+        workers = max(1, min(_default_workers() if workers is None else int(workers), S))
         chunks = [list(range(S))[k::workers] for k in range(workers)]
-        parts = None
-        if workers > 1 and "fork" in mp.get_all_start_methods():
-            global _PROPAGATION
-            _PROPAGATION = (self, job)
-            try:
-                with mp.get_context("fork").Pool(workers) as pool:
-                    parts = pool.map(_propagate_chunk, chunks)
-            except OSError:  # no processes allowed here (sandbox, limits): run the draws in this one
-                parts = None
-            finally:
-                _PROPAGATION = None
-        if parts is None:
-            parts = [self._propagate_draws(idx, *job) for idx in chunks]
+        parts = _fork_map(lambda idx: self._propagate_draws(idx, *job), chunks)
         out = {"joints": np.full((S, self.F, 17, 3), np.nan, np.float32),
                "joints_point": np.full((S, self.F, 17, 3), np.nan, np.float32),
                "angles": {k: np.full((S, self.F), np.nan) for k in ANGLE_NAMES},
@@ -651,17 +643,41 @@ class ClipModel:
         return out
 
 
-#: (model, job) handed to forked propagation workers (set only while a pool runs)
-_PROPAGATION = None
+#: the function forked workers run on their chunk (set only while a pool runs)
+_FORKED = None
 
 
-def _propagate_chunk(indices):
+def _default_workers():
+    import os
+
+    return min(os.cpu_count() or 1, 4)
+
+
+def _forked_chunk(indices):
     from threadpoolctl import threadpool_limits
 
-    model, job = _PROPAGATION
     # the workers already use every core: BLAS threads inside them only compete (4x slower)
     with threadpool_limits(limits=1):
-        return model._propagate_draws(indices, *job)
+        return _FORKED(indices)
+
+
+def _fork_map(func, chunks):
+    """``[func(chunk) for chunk in chunks]``, on one forked process per chunk when there are
+    several and the platform forks (the workers inherit ``func`` and its data; only the
+    chunks and the results are pickled), else here, as also when processes are not allowed."""
+    import multiprocessing as mp
+
+    global _FORKED
+    if len(chunks) > 1 and "fork" in mp.get_all_start_methods():
+        _FORKED = func
+        try:
+            with mp.get_context("fork").Pool(len(chunks)) as pool:
+                return pool.map(_forked_chunk, chunks)
+        except OSError:  # no processes allowed here (sandbox, limits)
+            pass
+        finally:
+            _FORKED = None
+    return [func(c) for c in chunks]
 
 
 def _ar1_noise(rng, shape, sd, rho):

@@ -217,3 +217,16 @@ def test_with_a_known_lens_frames_are_judged_on_the_undistorted_families(tmp_pat
     f = m._focal_at(h)
     true_f = np.array([c.focal_px for c in gt.cameras])
     assert np.max(np.abs(f / true_f - 1)) < 0.01
+    # the undistorted families are built on forked workers; where no process may be started,
+    # in this one, with exactly the same result
+    import multiprocessing
+
+    class NoProcesses:
+        def Pool(self, n):
+            raise OSError("no processes here")
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(multiprocessing, "get_context", lambda method: NoProcesses())
+        serial = ClipModel(reg, clip.keypoints_px, clip.fps, clip.athlete_lane, dist=gt.cameras[0].dist)
+    for key in ("h", "logf", "y", "R"):
+        assert np.array_equal(getattr(m, key), getattr(serial, key), equal_nan=True)
