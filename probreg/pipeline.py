@@ -41,7 +41,9 @@ class RunOptions:
     min_score: float = 0.3
     branch: str = "narrow"
     report: bool = True
-    band_inflation: float | None = None  # None: probreg.posterior.BAND_INFLATION
+    # None: the calibrated bands (probreg.posterior.BAND_SCALE and BAND_CURVATURE_S2); a number
+    # scales the bootstrap band by it, without the curvature term (1.0: raw bootstrap bands)
+    band_inflation: float | None = None
 
 
 @dataclass
@@ -168,7 +170,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
 
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        summ = angle_bands(prop["angles_point"], prop["angles"], inflation=options.band_inflation)
+        summ = angle_bands(prop["angles_point"], prop["angles"], fps=clip.fps, inflation=options.band_inflation)
         gait_s = {k: {"median": float(np.nanmedian(v)), "lo": float(np.nanpercentile(v, 5)),
                       "hi": float(np.nanpercentile(v, 95)), "unit": GAIT_FIELDS[k]} for k, v in gait.items()}
         joints_med = np.nanmedian(prop["joints_point"], 0)

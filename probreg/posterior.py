@@ -51,24 +51,55 @@ from .skeleton import ANGLE_NAMES, JOINT_INDEX
 from .trajectory import fit_ground_track
 
 __all__ = ["ClipModel", "SamplerSettings", "noise_model", "PARAM_NAMES", "angle_bands",
-           "BAND_INFLATION"]
+           "BAND_SCALE", "BAND_CURVATURE_S2", "angle_curvature"]
 
-#: Scale of the bootstrap deviations in the reported bands, calibrated on held-out synthetic
-#: clips (seeds outside the benchmark suite; ``probreg bench band-calibration``): the bootstrap
-#: misses the smoothing bias of the estimator (peaks flattened by the smoothing, true
-#: stride-to-stride differences pulled towards the neighbouring strides by the cross-stride
-#: prior), so its spread alone under-covers.  Re-measured at 1.91 after the forearm branch
-#: prior (2026-11-22), within the study's resolution; hip and elbow angles get the same factor
-#: (their own would be 1.79 and 1.91).
-BAND_INFLATION = 1.92
+#: Curvature weight (s^2) of the bands of the cross-stride smoothed angles: the smoothing's bias
+#: grows with the curvature of the angle curve (about half the squared smoothing time times the
+#: second derivative), which the bootstrap cannot show.  Chosen on held-out synthetic clips
+#: (``probreg bench band-calibration``): among 0-0.0015 s^2 it evens out the per-clip knee
+#: coverage most (mean distance from 90 %: 6.3 points without, 3.0 with it; fast runners,
+#: whose curves bend most, were under-covered) at 7 % more width.
+BAND_CURVATURE_S2 = 0.001
+
+#: Scale of the bootstrap deviations per angle family, fitted with the curvature term above
+#: for 90 % pooled coverage on the held-out clips of ``probreg bench band-calibration``; the
+#: trunk lean is not smoothed across strides and gets no curvature term.
+BAND_SCALE = {"knee": 1.27, "hip": 1.41, "elbow": 1.81, "trunk_lean": 1.36}
 
 
-def angle_bands(angles_point, angles_noisy, lo=5.0, hi=95.0, inflation=None):
+def angle_curvature(series, fps):
+    """Second derivative (deg/s^2) of an angle series, from differences over ~40 ms.
+
+    NaN where the series or a neighbour is missing; the ends take their nearest value.
+
+    >>> t = np.arange(50) / 50.0
+    >>> bool(np.allclose(angle_curvature(3.0 * (50 * t) ** 2 / 2500, 50.0), 6.0))
+    True
+    """
+    x = np.asarray(series, float)
+    lag = max(1, int(round(0.04 * fps)))
+    c = np.full(x.shape, np.nan)
+    if len(x) > 2 * lag:
+        c[lag:-lag] = (x[2 * lag:] - 2 * x[lag:-lag] + x[:-2 * lag]) * (fps / lag) ** 2
+        c[:lag], c[-lag:] = c[lag], c[-lag - 1]
+    return c
+
+
+def _band_family(name):
+    return name if name == "trunk_lean" else name.rsplit("_", 1)[0]
+
+
+def angle_bands(angles_point, angles_noisy, fps=None, lo=5.0, hi=95.0, inflation=None):
     """Per-frame median and band of every angle.
 
     The median is that of the point liftings (no re-simulated noise, which would add its
-    own bias); the band adds the bootstrap's spread about its own median, scaled by
-    ``inflation`` (default :data:`BAND_INFLATION`).
+    own bias).  Each side of the band is ``sqrt((k d)^2 + (a c)^2)``: ``d`` the bootstrap's
+    deviation from its own median (5th or 95th percentile), ``k`` the angle family's scale
+    (:data:`BAND_SCALE`), ``c`` the curvature of the median curve (:func:`angle_curvature`)
+    and ``a`` :data:`BAND_CURVATURE_S2` (0 for the trunk lean; the term is left out where
+    the curvature cannot be computed, or when ``fps`` is None).  ``inflation`` = a number
+    scales every bootstrap band by it and leaves the curvature out (1.0: the raw bootstrap
+    band, for calibration studies).
 
     Returns
     -------
@@ -76,7 +107,6 @@ def angle_bands(angles_point, angles_noisy, lo=5.0, hi=95.0, inflation=None):
     """
     import warnings
 
-    k = BAND_INFLATION if inflation is None else inflation
     out = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
@@ -84,9 +114,17 @@ def angle_bands(angles_point, angles_noisy, lo=5.0, hi=95.0, inflation=None):
             med = np.nanmedian(pts, 0)
             noisy = angles_noisy[name]
             centre = np.nanmedian(noisy, 0)
-            dev_lo = np.nanpercentile(noisy, lo, 0) - centre
+            dev_lo = centre - np.nanpercentile(noisy, lo, 0)
             dev_hi = np.nanpercentile(noisy, hi, 0) - centre
-            out[name] = (med, med + k * dev_lo, med + k * dev_hi)
+            fam = _band_family(name)
+            if inflation is not None:
+                k, bias = float(inflation), 0.0
+            else:
+                k = BAND_SCALE.get(fam, max(BAND_SCALE.values()))
+                a = 0.0 if fam == "trunk_lean" or fps is None else BAND_CURVATURE_S2
+                bias = a * np.abs(angle_curvature(med, fps)) if a > 0 else 0.0
+                bias = np.where(np.isfinite(bias), bias, 0.0)
+            out[name] = (med, med - np.hypot(k * dev_lo, bias), med + np.hypot(k * dev_hi, bias))
     return out
 
 SEGMENTS = ("thigh", "shank", "upper_arm", "forearm", "trunk", "hip_width", "shoulder_width")

@@ -230,3 +230,32 @@ def test_with_a_known_lens_frames_are_judged_on_the_undistorted_families(tmp_pat
         serial = ClipModel(reg, clip.keypoints_px, clip.fps, clip.athlete_lane, dist=gt.cameras[0].dist)
     for key in ("h", "logf", "y", "R"):
         assert np.array_equal(getattr(m, key), getattr(serial, key), equal_nan=True)
+
+
+def test_angle_bands_scale_the_bootstrap_and_add_the_curvature_term():
+    """Known answers: a straight angle curve gets the family's scale times the bootstrap
+    deviations; a parabola with no bootstrap spread gets the curvature term alone; a number
+    for ``inflation`` gives the scaled bootstrap band without that term."""
+    from probreg.posterior import BAND_CURVATURE_S2, BAND_SCALE, angle_bands
+
+    fps, F = 50.0, 100
+    t = np.arange(F) / fps
+    line = 30.0 + 10.0 * t
+    offsets = np.linspace(-1.0, 1.0, 101)[:, None]  # bootstrap draws: 5th/95th percentile -0.9/+0.9
+    point = {"knee_l": np.tile(line, (5, 1)), "trunk_lean": np.tile(line, (5, 1))}
+    noisy = {"knee_l": line + offsets, "trunk_lean": line + offsets}
+    med, lo, hi = angle_bands(point, noisy, fps=fps)["knee_l"]
+    assert np.allclose(med, line)
+    assert np.allclose(hi - med, BAND_SCALE["knee"] * 0.9) and np.allclose(med - lo, BAND_SCALE["knee"] * 0.9)
+    _, lo_t, hi_t = angle_bands(point, noisy, fps=fps)["trunk_lean"]
+    assert np.allclose(hi_t - lo_t, 2 * BAND_SCALE["trunk_lean"] * 0.9)
+    # a parabola of curvature 2000 deg/s^2, every draw alike: the band is the bias term alone
+    par = 1000.0 * (t - 1.0) ** 2
+    same = {"knee_l": np.tile(par, (5, 1))}
+    med, lo, hi = angle_bands(same, same, fps=fps)["knee_l"]
+    assert np.allclose(hi - med, BAND_CURVATURE_S2 * 2000.0) and np.allclose(med - lo, BAND_CURVATURE_S2 * 2000.0)
+    # inflation: the raw bootstrap band scaled, no curvature term (and without fps none either)
+    _, lo1, hi1 = angle_bands(same, same, fps=fps, inflation=1.0)["knee_l"]
+    assert np.allclose(lo1, par) and np.allclose(hi1, par)
+    _, lo0, hi0 = angle_bands(same, same)["knee_l"]
+    assert np.allclose(hi0, par)

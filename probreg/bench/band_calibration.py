@@ -1,13 +1,18 @@
 """Calibration of the credible bands on held-out synthetic clips (not the benchmark suite).
 
 The bootstrap spread of the propagated angles misses part of the estimator's
-error (the smoothing flattens true peaks and pulls true stride-to-stride
-differences towards the neighbouring strides, which re-simulated noise cannot show),
-so the reported bands scale the bootstrap deviations by a factor
-(``probreg.posterior.BAND_INFLATION``).  This benchmark measures the factor that
-puts 90 % of the true knee angles inside the 90 % band on clips whose seeds are
-outside the benchmark suite; the coverage study on the suite (``bench
-posterior``) then tests it out of sample.
+error: the smoothing flattens true peaks and pulls true stride-to-stride
+differences towards the neighbouring strides, which re-simulated noise cannot
+show.  The reported band therefore has two parts per side,
+``sqrt((k d)^2 + (a c)^2)``: the bootstrap deviation ``d`` scaled by ``k``,
+and a smoothing-bias term growing with the curvature ``c`` of the median
+angle curve (``probreg.posterior.angle_bands``).  This benchmark runs clips
+whose seeds are outside the benchmark suite with raw bootstrap bands, shows
+for a range of curvature weights ``a`` how evenly the clips are covered (mean
+distance of the per-clip coverage from 90 %) and how wide the band is, and
+fits ``k`` per angle family for 90 % pooled coverage at the weight in use
+(``BAND_CURVATURE_S2``; constants in ``BAND_SCALE``).  The coverage study on
+the suite (``bench posterior``) then tests them out of sample.
 """
 
 from __future__ import annotations
@@ -17,24 +22,57 @@ from pathlib import Path
 
 import numpy as np
 
-from ..io.clip import load_groundtruth
+from ..io.clip import load_clip, load_groundtruth
 from ..io.results import read_angles_csv
 from ..pipeline import RunOptions, run_clip
+from ..posterior import BAND_CURVATURE_S2, BAND_SCALE, angle_curvature
 from ..skeleton import joint_angles
 from ..synth import config_from_preset, synthesize, write_clip
 from .common import BenchReport, md_table
 
-__all__ = ["run", "HELD_OUT"]
+__all__ = ["run", "HELD_OUT", "fit_scale"]
 
 HELD_OUT = [("run", 901), ("jog", 902), ("fast", 903), ("tele", 904), ("wide", 905), ("high", 906),
             ("long_step", 907), ("distorted", 908)]
+FAMILIES = {"knee": ("knee_l", "knee_r"), "hip": ("hip_l", "hip_r"), "elbow": ("elbow_l", "elbow_r"),
+            "trunk_lean": ("trunk_lean",)}
+CURVATURE_GRID = (0.0, 0.0005, 0.001, 0.0015)
+
+
+def _coverage(clips, k, a):
+    """Per clip: (inside (n,) bool, width (n,)) of the band with scale ``k`` and curvature weight ``a``."""
+    out = []
+    for med, d_lo, d_hi, t, c in clips:
+        bias = a * np.abs(c)
+        lo, hi = med - np.hypot(k * d_lo, bias), med + np.hypot(k * d_hi, bias)
+        out.append(((t >= lo) & (t <= hi), hi - lo))
+    return out
+
+
+def fit_scale(clips, a, target=0.9):
+    """The scale ``k`` that puts ``target`` of all frames of ``clips`` inside the band (bisection).
+
+    ``clips``: list of (median, lower deviation, upper deviation, truth, curvature) arrays.
+
+    >>> from scipy.stats import norm
+    >>> t = norm.ppf((np.arange(20000) + 0.5) / 20000)  # errors with exact normal quantiles
+    >>> z = np.zeros_like(t)
+    >>> round(fit_scale([(z, z + 1, z + 1, t, z)], 0.0), 2)  # unit bands: 90 % within 1.64
+    1.64
+    """
+    lo_k, hi_k = 0.0, 10.0
+    for _ in range(50):
+        k = 0.5 * (lo_k + hi_k)
+        pooled = np.mean(np.concatenate([i for i, _ in _coverage(clips, k, a)]))
+        lo_k, hi_k = (k, hi_k) if pooled < target else (lo_k, k)
+    return 0.5 * (lo_k + hi_k)
 
 
 def run(args=None):
     rep = BenchReport("band-calibration", "Band calibration on held-out synthetic clips")
     rep.add(__doc__.split("\n\n", 1)[1])
-    z_all, rows = [], []
-    z_other = {"hip": [], "elbow": []}  # the same ratio for the other limb angles
+    data = {fam: [] for fam in FAMILIES}  # family -> per clip (med, d_lo, d_hi, truth, curvature)
+    names = []
     with tempfile.TemporaryDirectory() as tmp:
         for preset, seed in HELD_OUT:
             clip_dir = Path(tmp) / f"{preset}_{seed}"
@@ -47,31 +85,39 @@ def run(args=None):
                      log=lambda *a: None)
             ang = read_angles_csv(Path(tmp) / "out" / "angles.csv")
             truth = joint_angles(gt.joints3d_track_m)
-            def ratios(joint):
-                zs = []
-                for k in (f"{joint}_l", f"{joint}_r"):
+            fps = load_clip(clip_dir).fps
+            names.append(f"{preset} ({seed})")
+            for fam, keys in FAMILIES.items():
+                parts = []
+                for k in keys:
                     f, med, lo, hi = ang[k]
                     t = truth[k][f.astype(int)]
-                    with np.errstate(invalid="ignore", divide="ignore"):
-                        z = np.where(t >= med, (t - med) / (hi - med), (med - t) / (med - lo))
-                    zs.append(z[np.isfinite(z)])
-                return np.concatenate(zs)
-
-            z = ratios("knee")
-            z_all.append(z)
-            for joint in z_other:
-                z_other[joint].append(ratios(joint))
-            rows.append([f"{preset} (seed {seed})", 100 * np.mean(z <= 1.0), float(np.percentile(z, 90)),
-                         *[float(np.percentile(z_other[j][-1], 90)) for j in z_other]])
-    z = np.concatenate(z_all)
-    k90 = float(np.percentile(z, 90))
-    rep.add(md_table(["clip", "knee: coverage of the raw bootstrap band %",
-                      "knee: 90th percentile of abs. error / half-band", "hip: same", "elbow: same"], rows))
-    rep.add(f"Over all {len(z)} knee-frames: raw coverage {100 * np.mean(z <= 1):.1f} %; the inflation that "
-            f"gives 90 % coverage is **{k90:.2f}**.\n")
-    for joint, zs in z_other.items():
-        zj = np.concatenate(zs)
-        rep.add(f"{joint.capitalize()} angles with the knee's factor: {100 * np.mean(zj <= k90):.1f} % inside "
-                f"(their own 90 % factor would be {np.percentile(zj, 90):.2f}).\n")
-    rep.numbers["inflation"] = k90
+                    c = angle_curvature(med, fps)
+                    c = np.where(np.isfinite(c), c, 0.0)
+                    ok = np.isfinite(med) & np.isfinite(lo) & np.isfinite(hi) & np.isfinite(t)
+                    parts.append(np.stack([med, med - lo, hi - med, t, c])[:, ok])
+                data[fam].append(tuple(np.concatenate(parts, 1)))
+    rows, fitted = [], {}
+    for fam, clips in data.items():
+        for a in CURVATURE_GRID:
+            k = fit_scale(clips, a)
+            cov = _coverage(clips, k, a)
+            per = np.array([np.mean(i) for i, _ in cov])
+            width = float(np.mean(np.concatenate([w for _, w in cov])))
+            in_use = a == (0.0 if fam == "trunk_lean" else BAND_CURVATURE_S2)
+            if in_use:
+                fitted[fam] = (k, per)
+            rows.append([fam, f"{a:g}", k, width, 100 * np.mean(np.abs(per - 0.9)), 100 * per.min(),
+                         "yes" if in_use else ""])
+    rep.add("## Curvature weight: evenness of the per-clip coverage and width\n")
+    rep.add(md_table(["angles", "a (s^2)", "k for 90 % pooled", "mean band width deg",
+                      "mean distance of clip coverage from 90 % (points)", "lowest clip coverage %",
+                      "in use"], rows))
+    rep.add("## In use: per-clip coverage with the fitted scale\n")
+    rep.add(md_table(["clip"] + [f"{fam} %" for fam in FAMILIES],
+                     [[n] + [100 * fitted[fam][1][i] for fam in FAMILIES] for i, n in enumerate(names)]))
+    rep.add("Fitted scales (90 % pooled coverage at the weight in use): "
+            + ", ".join(f"{fam} **{k:.2f}** (in `BAND_SCALE`: {BAND_SCALE[fam]:.2f})"
+                        for fam, (k, _) in fitted.items()) + ".\n")
+    rep.numbers["scale"] = {fam: k for fam, (k, _) in fitted.items()}
     return rep
