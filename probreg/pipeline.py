@@ -23,7 +23,7 @@ from .io.clip import ClipFormatError, atomic_output_dir, load_clip, write_json
 from .io.frames import has_frames
 from .io.results import write_angles_csv, write_joints_npz
 from .kinematics import GAIT_FIELDS
-from .posterior import PARAM_NAMES, SEGMENTS, ClipModel, SamplerSettings, angle_bands
+from .posterior import PARAM_NAMES, SEGMENTS, ClipModel, SamplerSettings, angle_bands, gait_intervals
 from .priors import ModelPriors
 from .registration import camera_json, register_clip
 from .skeleton import JOINT_NAMES
@@ -171,8 +171,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         summ = angle_bands(prop["angles_point"], prop["angles"], fps=clip.fps, inflation=options.band_inflation)
-        gait_s = {k: {"median": float(np.nanmedian(v)), "lo": float(np.nanpercentile(v, 5)),
-                      "hi": float(np.nanpercentile(v, 95)), "unit": GAIT_FIELDS[k]} for k, v in gait.items()}
+        gait_s = {k: {"median": m, "lo": lo, "hi": hi, "unit": GAIT_FIELDS[k]} for k, (m, lo, hi) in
+                  gait_intervals(prop["gait_point"], gait, inflation=options.band_inflation).items()}
         joints_med = np.nanmedian(prop["joints_point"], 0)
     cams_med = model.cameras_at(height["median"])
     from .posterior import _as_list

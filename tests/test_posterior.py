@@ -259,3 +259,27 @@ def test_angle_bands_scale_the_bootstrap_and_add_the_curvature_term():
     assert np.allclose(lo1, par) and np.allclose(hi1, par)
     _, lo0, hi0 = angle_bands(same, same)["knee_l"]
     assert np.allclose(hi0, par)
+
+
+def test_gait_intervals_carry_the_step_timing_uncertainty(model):
+    """Contacts are fixed for the point liftings (every camera hypothesis scored on the same
+    steps), so their step timing is the same in every draw; the bootstrap liftings detect the
+    contacts anew on re-noised keypoints, so the reported intervals of cadence and contact
+    time are not of zero width."""
+    from probreg.posterior import gait_intervals
+
+    m, gt = model
+    h = gt.cameras[0].C[2]
+    S = 12
+    draws = np.column_stack([np.log(np.full(S, h)), np.full(S, gt.athlete["stature_m"]),
+                             np.ones((S, len(PARAM_NAMES) - 2))])
+    prop = m.propagate(draws, np.random.default_rng(7), workers=1)
+    point, noisy = prop["gait_point"], prop["gait"]
+    assert point.keys() == noisy.keys()
+    assert np.ptp(point["contact_time_s"]) == 0 and np.ptp(point["cadence_spm"]) == 0
+    timing = [k for k in ("contact_time_s", "cadence_spm") if np.ptp(noisy[k][np.isfinite(noisy[k])]) > 0]
+    assert timing
+    g = gait_intervals(point, noisy, inflation=1.0)
+    for k in timing:
+        med, lo, hi = g[k]
+        assert lo < hi and lo <= med <= hi and med == np.nanmedian(point[k])

@@ -17,6 +17,7 @@ the suite (``bench posterior``) then tests them out of sample.
 
 from __future__ import annotations
 
+import json
 import tempfile
 from pathlib import Path
 
@@ -25,7 +26,8 @@ import numpy as np
 from ..io.clip import load_clip, load_groundtruth
 from ..io.results import read_angles_csv
 from ..pipeline import RunOptions, run_clip
-from ..posterior import BAND_CURVATURE_S2, BAND_SCALE, angle_curvature
+from ..posterior import BAND_CURVATURE_S2, BAND_SCALE, GAIT_BAND_SCALE, angle_curvature
+from .posterior import true_gait
 from ..skeleton import joint_angles
 from ..synth import config_from_preset, synthesize, write_clip
 from .common import BenchReport, md_table
@@ -72,6 +74,7 @@ def run(args=None):
     rep = BenchReport("band-calibration", "Band calibration on held-out synthetic clips")
     rep.add(__doc__.split("\n\n", 1)[1])
     data = {fam: [] for fam in FAMILIES}  # family -> per clip (med, d_lo, d_hi, truth, curvature)
+    gait_z = []  # per clip and gait number: |error| / half-interval on the truth's side
     names = []
     with tempfile.TemporaryDirectory() as tmp:
         for preset, seed in HELD_OUT:
@@ -87,6 +90,14 @@ def run(args=None):
             truth = joint_angles(gt.joints3d_track_m)
             fps = load_clip(clip_dir).fps
             names.append(f"{preset} ({seed})")
+            gait = json.loads((Path(tmp) / "out" / "gait.json").read_text())
+            for name, t in true_gait(clip_dir).items():
+                g = gait.get(name)
+                if g is None or g["median"] is None or not (np.isfinite(t) and np.isfinite(g["median"])):
+                    continue
+                half = g["hi"] - g["median"] if t >= g["median"] else g["median"] - g["lo"]
+                err = abs(t - g["median"])
+                gait_z.append((name, err / half if half > 0 else (0.0 if err == 0 else np.inf)))
             for fam, keys in FAMILIES.items():
                 parts = []
                 for k in keys:
@@ -120,4 +131,17 @@ def run(args=None):
             + ", ".join(f"{fam} **{k:.2f}** (in `BAND_SCALE`: {BAND_SCALE[fam]:.2f})"
                         for fam, (k, _) in fitted.items()) + ".\n")
     rep.numbers["scale"] = {fam: k for fam, (k, _) in fitted.items()}
+    z = np.array([v for _, v in gait_z])
+    kg = float(np.percentile(z, 90))
+    rep.add("## Gait numbers\n")
+    rep.add("Each gait number's interval (`gait.json`) is the bootstrap liftings' spread (contacts detected "
+            "anew on re-noised keypoints) about the point liftings' median, scaled by `GAIT_BAND_SCALE`. "
+            "Per number, the ratio of the error to the raw half-interval on the truth's side:\n")
+    rep.add(md_table(["number", "clips", "median ratio", "largest ratio", "inside the raw interval"],
+                     [[n, len(v), float(np.median(v)), float(np.max(v)), f"{int(np.sum(np.asarray(v) <= 1))} of {len(v)}"]
+                      for n in dict.fromkeys(k for k, _ in gait_z)
+                      for v in [[r for kk, r in gait_z if kk == n]]]))
+    rep.add(f"Over all {len(z)} clip-numbers the raw intervals hold {100 * np.mean(z <= 1):.1f} % of the truths; "
+            f"the scale for 90 % is **{kg:.2f}** (in `GAIT_BAND_SCALE`: {GAIT_BAND_SCALE:.2f}).\n")
+    rep.numbers["gait_scale"] = kg
     return rep

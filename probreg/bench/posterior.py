@@ -13,6 +13,10 @@ known (prior sd 2 cm), as a sports scientist who measured the athlete would.
   contains the true height (target ~9 in 10);
 * the same error and band coverage for the hip and elbow angles (no target in
   the issue; reported because users read them too);
+* the gait numbers of ``gait.json`` (cadence, step length, speed, contact and
+  flight time, peak swing knee flexion, knee flexion at touchdown): error of the
+  median and how many clips' 90 % intervals hold the truth, the truth computed
+  with the same definitions from the true joints and contacts;
 * time of the whole run per 250-frame clip (2 cores).
 """
 
@@ -34,7 +38,22 @@ from ..synth import SUITES
 from .common import BenchReport, md_table
 from .registration import suite_dir
 
-__all__ = ["run", "score_result"]
+__all__ = ["run", "score_result", "true_gait"]
+
+
+def true_gait(clip_dir):
+    """Gait numbers of the ground truth (true contacts, pelvis speed and knee angles), with
+    the definitions of :func:`probreg.kinematics.gait_summary`."""
+    from types import SimpleNamespace
+
+    from ..io.clip import load_clip
+    from ..kinematics import gait_summary
+
+    gt = load_groundtruth(clip_dir)
+    fps = load_clip(clip_dir).fps
+    pel = gt.joints3d_track_m[:, JOINT_INDEX["pelvis"], :2]
+    track = SimpleNamespace(contacts=np.asarray(gt.contacts, bool), velocity_mps=np.gradient(pel, axis=0) * fps)
+    return gait_summary(track, joint_angles(gt.joints3d_track_m), fps)
 
 
 def score_result(clip_dir, out_dir):
@@ -71,7 +90,16 @@ def score_result(clip_dir, out_dir):
         g = gt.cameras[i]
         loc.append(100 * np.linalg.norm((c.C - g.C)[1:]) / np.linalg.norm(g.C[:2] - pel[i]))
         fov.append(abs(c.fov_deg - g.fov_deg))
+    gait = json.loads((Path(out_dir) / "gait.json").read_text())
+    gait_scores = {}
+    for name, t in true_gait(clip_dir).items():
+        g = gait.get(name)
+        if g is None or not np.isfinite(t) or g["median"] is None or not np.isfinite(g["median"]):
+            continue
+        gait_scores[name] = {"error": g["median"] - t, "rel_pct": 100 * (g["median"] - t) / abs(t) if t else np.nan,
+                             "inside": bool(g["lo"] <= t <= g["hi"]), "width": g["hi"] - g["lo"], "truth": t}
     return {
+        "gait": gait_scores,
         "knee_deg": float(np.mean(knee_err)), "mpjpe_cm": mpjpe,
         "height_pct": 100 * abs(h["median"] - h_true) / h_true,
         "height_in_interval": bool(h["lo"] <= h_true <= h["hi"]),
@@ -153,6 +181,24 @@ def run(args=None):
             rep.add(f"### {variant}: targets\n")
             rep.add(md_table(["quantity", "target", "measured", "met"],
                              [[a, b, c, "yes" if d else "**no**"] for a, b, c, d in checks]))
+            from ..kinematics import GAIT_FIELDS
+
+            grows = []
+            for name, unit in GAIT_FIELDS.items():
+                sc = [s["gait"][name] for s in S if name in s["gait"]]
+                if not sc:
+                    continue
+                grows.append([name, unit, np.mean([abs(x["error"]) for x in sc]),
+                              np.nanmean([abs(x["rel_pct"]) for x in sc]), np.mean([x["width"] for x in sc]),
+                              f"{sum(x['inside'] for x in sc)} of {len(sc)}"])
+            inside_all = [x["inside"] for s in S for x in s["gait"].values()]
+            summ["gait_coverage"] = float(np.mean(inside_all)) if inside_all else float("nan")
+            rep.add(f"### {variant}: gait numbers (`gait.json`)\n")
+            rep.add(md_table(["number", "unit", "mean abs. error of the median", "mean abs. error %",
+                              "mean 90 % interval width", "intervals holding the truth"], grows,
+                             floatfmt="{:.3g}"))
+            rep.add(f"Over all numbers and clips, {100 * summ['gait_coverage']:.1f} % of the 90 % intervals hold "
+                    f"the truth.\n")
             rep.add(f"Without a target: hip-angle error {summ['hip_deg']:.2f} deg, "
                     f"{100 * summ['hip_coverage']:.1f} % inside the band; elbow-angle error "
                     f"{summ['elbow_deg']:.2f} deg, {100 * summ['elbow_coverage']:.1f} % inside the band.\n")
