@@ -20,7 +20,8 @@ import numpy as np
 
 from .skeleton import JOINT_INDEX
 
-__all__ = ["GroundTrack", "TrackConfig", "cast_ankles", "detect_contacts", "fit_ground_track"]
+__all__ = ["GroundTrack", "TrackConfig", "cast_ankles", "detect_contacts", "fit_ground_track",
+           "sagittal_ankle_height", "gate_contacts_by_height"]
 
 
 @dataclass(frozen=True)
@@ -44,6 +45,14 @@ class TrackConfig:
         cannot swing through in 0.1 s (a runner's swing takes 0.25 s or more), and a
         stance split in two gives two footprints at one place a few frames apart,
         which read as the athlete standing still.
+    contact_height_margin_m : float or None
+        Height gate on the ends of each detected contact: frames where the ankle, cast onto
+        the athlete's vertical sagittal plane, is more than this above its median height in
+        contact are cut from the start and end of the contact.  In late swing a runner
+        pulls the foot back towards the ground speed (foot retraction), so the speed test
+        alone takes the last frames before touchdown (ankle still ~0.2 m up) for contact;
+        this made contacts 50-80 ms too long for high and telephoto views.  0.06 m was
+        chosen on the benchmark suite (``reports/bench_posterior.md``); None disables it.
     """
 
     accel_std_mps2: tuple = (1.5, 0.6)
@@ -51,6 +60,7 @@ class TrackConfig:
     contact_speed_frac: float = 0.35
     min_contact_frames: int = 2
     max_gap_s: float = 0.1
+    contact_height_margin_m: float | None = 0.06
 
 
 @dataclass(frozen=True)
@@ -224,14 +234,78 @@ def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: Tr
     -------
     GroundTrack
     """
+    F = len(keypoints_px)
+    ankles = cast_ankles(cameras, keypoints_px, ankle_height_m)
+    if contacts is not None:
+        return _track_from_contacts(ankles, np.asarray(contacts, bool), fps, config)
+    contacts = detect_contacts(ankles, fps, config, camera_xy=_rays(cameras, np.zeros((F, 0, 2)))[0][:, :2])
+    first = _track_from_contacts(ankles, contacts, fps, config)
+    if config.contact_height_margin_m is None or first.status != "ok":
+        return first
+    z = sagittal_ankle_height(cameras, keypoints_px, first)
+    gated = gate_contacts_by_height(contacts, z, config.contact_height_margin_m, config.min_contact_frames)
+    if np.array_equal(gated, contacts) or not gated.any():
+        return first
+    return _track_from_contacts(ankles, gated, fps, config)
+
+
+def sagittal_ankle_height(cameras, keypoints_px, track: GroundTrack):
+    """Height (m) of each ankle ``[left, right]`` where its ray meets the athlete's vertical plane.
+
+    The plane is the track's line of travel shifted by half the step width to the foot's
+    side (left feet land left of it).  Cast this way a keypoint's height is seen nearly
+    face-on by a broadcast camera, so a foot in late swing (0.2 m up) is told from a foot
+    on the ground, which the ground plane cannot do.  Returns (F, 2), NaN where missing.
+    """
+    kp = np.asarray(keypoints_px, float)[:, [JOINT_INDEX["l_ankle"], JOINT_INDEX["r_ankle"]], :2]
+    o, d = _rays(cameras, kp)
+    y0 = track.position_m[:, 1][:, None] + np.array([1.0, -1.0]) * track.half_step_m
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = (y0 - o[:, None, 1]) / d[..., 1]
+        z = o[:, None, 2] + t * d[..., 2]
+    return np.where(t > 0, z, np.nan)
+
+
+def gate_contacts_by_height(contacts, height_m, margin_m, min_frames=2):
+    """Cut frames from the start and end of every contact while the ankle is too high.
+
+    ``height_m`` (F, 2) is the ankle height (e.g. :func:`sagittal_ankle_height`); a frame
+    is too high when it exceeds the median height over all contact frames by more than
+    ``margin_m``.  Frames inside a contact are kept (a noisy frame does not split a
+    stance); contacts left shorter than ``min_frames`` are dropped.
+
+    >>> c = np.array([[0, 1, 1, 1, 1, 1, 0]] * 2, bool).T
+    >>> z = np.array([[0.3, 0.2, 0.07, 0.3, 0.08, 0.09, 0.3]] * 2).T
+    >>> gate_contacts_by_height(c, z, 0.05)[:, 0].astype(int).tolist()
+    [0, 0, 1, 1, 1, 1, 0]
+    """
+    c = np.asarray(contacts, bool)
+    z = np.asarray(height_m, float)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        ref = np.nanmedian(z[c]) if c.any() else np.nan
+    if not np.isfinite(ref):
+        return c.copy()
+    high = np.nan_to_num(z, nan=-np.inf) > ref + margin_m  # a missing height does not cut
+    out = np.zeros_like(c)
+    for s in range(c.shape[1]):
+        edges = np.diff(np.concatenate([[0], c[:, s].astype(int), [0]]))
+        for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+            while a < b and high[a, s]:
+                a += 1
+            while b > a and high[b - 1, s]:
+                b -= 1
+            if b - a >= min_frames:
+                out[a:b, s] = True
+    return out
+
+
+def _track_from_contacts(ankles, contacts, fps, config):
+    """The Kalman/RTS ground track from cast ankles (F, 2, 3) and fixed contact flags."""
     from filterpy.common import Q_discrete_white_noise
     from filterpy.kalman import KalmanFilter
 
-    F = len(keypoints_px)
-    ankles = cast_ankles(cameras, keypoints_px, ankle_height_m)
-    if contacts is None:
-        contacts = detect_contacts(ankles, fps, config, camera_xy=_rays(cameras, np.zeros((F, 0, 2)))[0][:, :2])
-    contacts = np.asarray(contacts, bool)
+    F = len(ankles)
     cps = _contact_points(ankles, contacts)
     if len(cps) >= 3:
         # athletes keep to their lane: a "contact" far off the clip's median lateral position

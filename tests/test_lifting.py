@@ -290,3 +290,30 @@ def test_forearms_crossing_the_body_are_lifted_on_the_medial_branch(seed):
     assert count > 50
     # a zero-mean lateral prior on the wrist picked the mirror branch in about half of them
     assert agree / count > 0.75
+
+
+def test_height_gate_cuts_late_swing_from_contacts():
+    """A jogger pulls the foot back to the ground speed before touchdown: the speed test
+    alone counts those frames (ankle still ~0.2 m up) as contact and the contacts come
+    out ~60 ms too long.  The ankle's height on the athlete's vertical plane cuts them."""
+    from probreg.kinematics import _runs
+    from probreg.synth import config_from_preset, synthesize
+    from probreg.trajectory import TrackConfig, sagittal_ankle_height
+
+    clip = synthesize(config_from_preset("jog", 5, n_frames=150), seed=5, preset="jog")
+    F, fps = len(clip.cameras), clip.config.fps
+    kp = clean_keypoints(clip.keypoints_px, fps)
+    truth = clip.motion.contacts
+
+    def contact_time(c):
+        return np.mean([b - a for s in (0, 1) for a, b in _runs(c[:, s]) if a > 0 and b < F]) / fps
+
+    speed_only = fit_ground_track(clip.cameras, kp, fps, config=TrackConfig(contact_height_margin_m=None))
+    gated = fit_ground_track(clip.cameras, kp, fps)
+    assert contact_time(speed_only.contacts) - contact_time(truth) > 0.04
+    assert abs(contact_time(gated.contacts) - contact_time(truth)) < 0.015
+    assert (gated.contacts == truth).mean() > (speed_only.contacts == truth).mean()
+    # the cast height itself: ankles on the ground are low, ankles in the air high
+    z = sagittal_ankle_height(clip.cameras, kp, gated)
+    z_true = clip.motion.joints_track_m[:, [JOINT_INDEX["l_ankle"], JOINT_INDEX["r_ankle"]], 2]
+    assert np.nanmedian(np.abs(z - z_true)) < 0.03

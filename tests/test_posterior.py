@@ -283,3 +283,25 @@ def test_gait_intervals_carry_the_step_timing_uncertainty(model):
     for k in timing:
         med, lo, hi = g[k]
         assert lo < hi and lo <= med <= hi and med == np.nanmedian(point[k])
+
+
+def test_planted_feet_slide_at_wrong_camera_heights(tmp_path):
+    """A foot in early stance stands still; family members at a wrong height disagree from
+    frame to frame on where it is, so it seems to slide.  The slide changes sign at about
+    the true height, and the likelihood term built on it peaks there."""
+    from probreg.synth import config_from_preset, synthesize, write_clip
+
+    clip = synthesize(config_from_preset("run", 5, n_frames=150), seed=5, preset="run")
+    write_clip(clip, tmp_path / "c", images=True, jobs=1)
+    c = load_clip(tmp_path / "c")
+    h_true = float(load_groundtruth(tmp_path / "c").cameras[0].C[2])
+    model = ClipModel(register_clip(c), c.keypoints_px, c.fps, c.athlete_lane)
+    assert len(model._stance_windows()) >= 6
+    lg = np.log(model.grid / h_true)
+    ok = np.isfinite(model.slide_median) & (np.abs(lg) < np.log(1.25))
+    slide = model.slide_median[ok]
+    assert np.all(np.diff(slide) < 0)  # the slide falls steadily with height here
+    crossing = np.interp(0.0, -slide, lg[ok])
+    assert abs(crossing) < np.log(1.1)
+    assert np.interp(np.log(0.85), lg[ok], slide) > 0.2 and np.interp(np.log(1.15), lg[ok], slide) < -0.2
+    assert abs(lg[np.argmax(model.ll_still)]) < np.log(1.1)

@@ -96,7 +96,7 @@ def score_result(clip_dir, out_dir):
         g = gait.get(name)
         if g is None or not np.isfinite(t) or g["median"] is None or not np.isfinite(g["median"]):
             continue
-        gait_scores[name] = {"error": g["median"] - t, "rel_pct": 100 * (g["median"] - t) / abs(t) if t else np.nan,
+        gait_scores[name] = {"median": g["median"], "lo": g["lo"], "hi": g["hi"], "error": g["median"] - t, "rel_pct": 100 * (g["median"] - t) / abs(t) if t else np.nan,
                              "inside": bool(g["lo"] <= t <= g["hi"]), "width": g["hi"] - g["lo"], "truth": t}
     return {
         "gait": gait_scores,
@@ -191,6 +191,17 @@ def run(args=None):
                 grows.append([name, unit, np.mean([abs(x["error"]) for x in sc]),
                               np.nanmean([abs(x["rel_pct"]) for x in sc]), np.mean([x["width"] for x in sc]),
                               f"{sum(x['inside'] for x in sc)} of {len(sc)}"])
+            rep.add(f"Per clip, contact time and cadence: median [90 %] (true)\n")
+            rows_g = []
+            for n, _, s_ in rows:
+                cells = [n]
+                for name, fmt in (("contact_time_s", "{:.3f}"), ("cadence_spm", "{:.1f}")):
+                    x = s_["gait"].get(name)
+                    cells.append("n/a" if x is None else
+                                 f"{fmt.format(x['median'])} [{fmt.format(x['lo'])}, {fmt.format(x['hi'])}] "
+                                 f"({fmt.format(x['truth'])})")
+                rows_g.append(cells)
+            rep.add(md_table(["clip", "contact time s", "cadence steps/min"], rows_g))
             inside_all = [x["inside"] for s in S for x in s["gait"].values()]
             summ["gait_coverage"] = float(np.mean(inside_all)) if inside_all else float("nan")
             rep.add(f"### {variant}: gait numbers (`gait.json`)\n")
