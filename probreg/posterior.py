@@ -51,7 +51,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from .filtering import clean_keypoints, noise_model, score_noise_scale, stride_lags
-from .kinematics import gait_summary
+from .kinematics import _runs, gait_summary
 from .lifting import CameraArrays, LiftConfig, estimate_segments, lift
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
 from .registration import (ClipRegistration, _zoom_outliers, athlete_ground_track, glitch_vote,
@@ -436,7 +436,8 @@ class ClipModel:
         # same measurements; the filter's noise scales with the hypothesis (scale ~ height)
         ref = fit_ground_track(self.cameras_at(self.h_ref), self.kp, self.fps)
         self.contacts = ref.contacts
-        slides = np.full((G, len(self._stance_windows())), np.nan)
+        self.stance_windows = self._stance_windows()
+        slides = np.full((G, len(self.stance_windows)), np.nan)
         n_frames = max(int(self.valid.sum()), 1)
         for g, h in enumerate(self.grid):
             cams = self.cameras_at(h)
@@ -470,34 +471,26 @@ class ClipModel:
 
     def _stance_windows(self):
         """``(side, first, n)``: the first half of every whole contact (foot flat)."""
-        out = []
-        for side in (0, 1):
-            c = self.contacts[:, side].astype(int)
-            edges = np.diff(np.concatenate([[0], c, [0]]))
-            for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
-                if a > 0 and b < self.F and b - a >= 3:  # a contact cut by the clip has no known half
-                    out.append((side, int(a), max(2, (b - a) // 2 + 1)))
-        return out
+        return [(side, int(a), max(2, (b - a) // 2 + 1)) for side in (0, 1)
+                for a, b in _runs(self.contacts[:, side])
+                if a > 0 and b < self.F and b - a >= 3]  # a contact cut by the clip has no known half
 
     def _slides(self, cams, tr):
-        """Along-track velocity of each planted ankle (first half of its contact) as a fraction of
-        the running speed, for the cameras ``cams``: (K,), NaN where unmeasured.
+        """Along-track velocity of each planted ankle (first half of its contact, windows
+        ``self.stance_windows``) as a fraction of the running speed, for the cameras ``cams``:
+        (K,), NaN where unmeasured.
 
-        The ankle is cast onto the athlete's vertical plane (as in
-        :func:`probreg.trajectory.sagittal_ankle_height`), where its along-track position
+        The ankle is cast onto the athlete's vertical plane
+        (:func:`probreg.trajectory.sagittal_ankle_points`), where its along-track position
         does not move when the ankle rises (on the ground plane it would)."""
-        from .trajectory import _rays
+        from .trajectory import sagittal_ankle_points
 
-        win = self._stance_windows()
+        win = self.stance_windows
         out = np.full(len(win), np.nan)
         if not win or tr.status != "ok":
             return out
-        kp = self.kp[:, [JOINT_INDEX["l_ankle"], JOINT_INDEX["r_ankle"]], :2]
-        o, d = _rays(cams, kp)
-        y0 = tr.position_m[:, 1][:, None] + np.array([1.0, -1.0]) * tr.half_step_m
-        with np.errstate(invalid="ignore", divide="ignore"):
-            t = (y0 - o[:, None, 1]) / d[..., 1]
-            x = np.where(t > 0, o[:, None, 0] + t * d[..., 0], np.nan)
+        x = sagittal_ankle_points(cams, self.kp, tr)[..., 0]
+        with np.errstate(invalid="ignore"):
             v_run = float(np.nanmedian(tr.velocity_mps[:, 0]))
         if not np.isfinite(v_run) or abs(v_run) < 0.5:
             return out
@@ -505,8 +498,7 @@ class ClipModel:
             xs = x[a:a + n, side]
             ok = np.isfinite(xs)
             if ok.sum() >= 2:
-                tt = np.flatnonzero(ok).astype(float)
-                out[k] = np.polyfit(tt, xs[ok], 1)[0] * self.fps / v_run
+                out[k] = np.polyfit(np.flatnonzero(ok).astype(float), xs[ok], 1)[0] * self.fps / v_run
         return out
 
     def _score_slides(self, slides):

@@ -149,9 +149,9 @@ def scale_note(stature_prior, stature_draws):
     Lanes fix the camera only up to its one degree of freedom, and a 2D skeleton has
     no size of its own: the athlete's stature prior, and the planted feet of a panning
     camera (at a wrong scale they seem to slide; ``posterior.STILLNESS_SYS_SD``), turn
-    pixels into metres.  When the clip narrows the stature little beyond its prior, the camera height, the
-    limb lengths, step length and speed carry the prior's uncertainty (joint angles do
-    not depend on the scale).
+    pixels into metres.  When the clip narrows the stature little beyond its prior, the
+    camera height, the limb lengths, step length and speed carry the prior's uncertainty
+    (joint angles do not depend on the scale).
 
     >>> from probreg.priors import NormalPrior
     >>> rng = np.random.default_rng(0)

@@ -18,10 +18,11 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .kinematics import _runs
 from .skeleton import JOINT_INDEX
 
 __all__ = ["GroundTrack", "TrackConfig", "cast_ankles", "detect_contacts", "fit_ground_track",
-           "sagittal_ankle_height", "gate_contacts_by_height"]
+           "sagittal_ankle_points", "sagittal_ankle_height", "gate_contacts_by_height"]
 
 
 @dataclass(frozen=True)
@@ -249,21 +250,28 @@ def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: Tr
     return _track_from_contacts(ankles, gated, fps, config)
 
 
-def sagittal_ankle_height(cameras, keypoints_px, track: GroundTrack):
-    """Height (m) of each ankle ``[left, right]`` where its ray meets the athlete's vertical plane.
+def sagittal_ankle_points(cameras, keypoints_px, track: GroundTrack):
+    """Ankles ``[left, right]`` cast onto the athlete's vertical plane: (F, 2, 3), NaN where missing.
 
     The plane is the track's line of travel shifted by half the step width to the foot's
-    side (left feet land left of it).  Cast this way a keypoint's height is seen nearly
-    face-on by a broadcast camera, so a foot in late swing (0.2 m up) is told from a foot
-    on the ground, which the ground plane cannot do.  Returns (F, 2), NaN where missing.
+    side (left feet land left of it).  A broadcast camera sees this plane nearly face-on,
+    so the cast point's height tells a foot in late swing (0.2 m up) from a foot on the
+    ground, which the ground plane cannot do, and its along-track position does not move
+    when the ankle merely rises.
     """
     kp = np.asarray(keypoints_px, float)[:, [JOINT_INDEX["l_ankle"], JOINT_INDEX["r_ankle"]], :2]
     o, d = _rays(cameras, kp)
     y0 = track.position_m[:, 1][:, None] + np.array([1.0, -1.0]) * track.half_step_m
     with np.errstate(invalid="ignore", divide="ignore"):
         t = (y0 - o[:, None, 1]) / d[..., 1]
-        z = o[:, None, 2] + t * d[..., 2]
-    return np.where(t > 0, z, np.nan)
+        P = o[:, None, :] + t[..., None] * d
+    return np.where((np.isfinite(t) & (t > 0))[..., None], P, np.nan)
+
+
+def sagittal_ankle_height(cameras, keypoints_px, track: GroundTrack):
+    """Height (m) of each ankle ``[left, right]`` on the athlete's vertical plane
+    (:func:`sagittal_ankle_points`): (F, 2), NaN where missing."""
+    return sagittal_ankle_points(cameras, keypoints_px, track)[..., 2]
 
 
 def gate_contacts_by_height(contacts, height_m, margin_m, min_frames=2):
@@ -289,8 +297,7 @@ def gate_contacts_by_height(contacts, height_m, margin_m, min_frames=2):
     high = np.nan_to_num(z, nan=-np.inf) > ref + margin_m  # a missing height does not cut
     out = np.zeros_like(c)
     for s in range(c.shape[1]):
-        edges = np.diff(np.concatenate([[0], c[:, s].astype(int), [0]]))
-        for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+        for a, b in _runs(c[:, s]):
             while a < b and high[a, s]:
                 a += 1
             while b > a and high[b - 1, s]:
