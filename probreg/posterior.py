@@ -66,7 +66,7 @@ __all__ = ["ClipModel", "SamplerSettings", "noise_model", "PARAM_NAMES", "angle_
 #: to stand still.  Real runners' ankles are not still at the ends of a contact: in the
 #: CMU running mocap (``shared/data/mocap``, 7 clips, 4 subjects) the ankle moves 1-2 cm
 #: forward from heel strike to foot flat (first ~15 % of stance; 5 cm for the jogger)
-#: and rises with the heel from ~45 %; in between it slides by 0.017 of the running
+#: and rises with the heel from ~45 %; in between it slides by 0.019 of the running
 #: speed (median of 18 contacts; sd 0.04), i.e. well inside :data:`STILLNESS_SYS_SD`.
 #: Skipping the first 15 % also skips the 1-3 frames by which detected contacts tend to
 #: start early (late swing, where the ankle still moves).

@@ -185,16 +185,16 @@ def run(args=None):
     cat = {k: (np.concatenate([p[k] for p in pooled_real]), np.concatenate([p[k] for p in pooled_syn]))
            for k in ("early_travel_cm", "slide", "rise_cm")}
     rows.append(["all contacts", len(cat["slide"][0]), *(np.median(v) for k in cat for v in cat[k])])
-    from ..posterior import STANCE_WINDOW
+    from ..posterior import STANCE_WINDOW, STILLNESS_SYS_SD
 
     p0, p1 = STANCE_WINDOW
     rep.add(f"## (d) The stance ankle (medians per contact; window {100 * p0:.0f}-{100 * p1:.0f} % of stance)\n")
     rep.add(md_table(["clip", "real contacts", "real travel 0-15 % cm", "synthetic", "real slide in window",
-                      "synthetic", "real rise at window end cm", "synthetic"], rows))
+                      "synthetic", "real rise at window end cm", "synthetic"], rows, "{:.3f}"))
     rep.add("Travel: forward motion of the ankle from touchdown to 15 % of stance (heel strike to foot "
             "flat). Slide: its along-track velocity inside the window as a fraction of the running speed, "
-            "which the planted-feet term of the posterior takes as zero (sd `STILLNESS_SYS_SD` = 0.08 "
-            "about it). The synthetic ankle stands exactly still in the first half of stance (foot-flat "
+            "which the planted-feet term of the posterior takes as zero (sd `STILLNESS_SYS_SD` = "
+            f"{STILLNESS_SYS_SD} about it). The synthetic ankle stands exactly still in the first half of stance (foot-flat "
             "from touchdown), where a real one still rolls forward in early stance; the window leaves "
             "that phase out, and what remains of the real slide there is the bias a real clip adds "
             "(one per cent of camera height per 0.025).\n")
