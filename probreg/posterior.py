@@ -60,7 +60,7 @@ from .skeleton import ANGLE_NAMES, JOINT_INDEX
 from .trajectory import fit_ground_track
 
 __all__ = ["ClipModel", "SamplerSettings", "noise_model", "PARAM_NAMES", "angle_bands", "STILLNESS_SYS_SD",
-           "STANCE_WINDOW", "BAND_SCALE", "BAND_CURVATURE_S2", "angle_curvature", "gait_intervals", "GAIT_BAND_SCALE"]
+           "STANCE_WINDOW", "stance_window", "BAND_SCALE", "BAND_CURVATURE_S2", "angle_curvature", "gait_intervals", "GAIT_BAND_SCALE"]
 
 #: Part of every detected contact (fractions of its length) in which the ankle is taken
 #: to stand still.  Real runners' ankles are not still at the ends of a contact: in the
@@ -71,6 +71,17 @@ __all__ = ["ClipModel", "SamplerSettings", "noise_model", "PARAM_NAMES", "angle_
 #: Skipping the first 15 % also skips the 1-3 frames by which detected contacts tend to
 #: start early (late swing, where the ankle still moves).
 STANCE_WINDOW = (0.15, 0.45)
+
+
+def stance_window(a, b, window=STANCE_WINDOW):
+    """Frames ``(first, n)`` of the planted part (fractions ``window``) of a contact that
+    runs over frames ``a`` to ``b - 1``; at least two frames.
+
+    >>> stance_window(10, 31)  # a 21-frame contact: frames 13-19
+    (13, 7)
+    """
+    i0 = int(round(window[0] * (b - a)))
+    return int(a) + i0, max(2, int(round(window[1] * (b - a))) - i0 + 1)
 
 #: Systematic sd of the planted-foot slide (fraction of the running speed) at the true
 #: camera height.  One per cent of height moves the slide by ~0.025, so alone the term
@@ -155,6 +166,7 @@ def angle_bands(angles_point, angles_noisy, fps=None, lo=5.0, hi=95.0, inflation
                 bias = np.where(np.isfinite(bias), bias, 0.0)
             out[name] = (med, med - np.hypot(k * dev_lo, bias), med + np.hypot(k * dev_hi, bias))
     return out
+
 
 #: Scale of the bootstrap deviations of the gait numbers, fitted on held-out synthetic clips
 #: for 90 % coverage over all clips and numbers (``probreg bench band-calibration``).
@@ -486,14 +498,8 @@ class ClipModel:
     def _stance_windows(self):
         """``(side, first, n)``: the foot-flat part of every whole contact
         (fractions :data:`STANCE_WINDOW` of the detected contact)."""
-        p0, p1 = STANCE_WINDOW
-        out = []
-        for side in (0, 1):
-            for a, b in _runs(self.contacts[:, side]):
-                if a > 0 and b < self.F and b - a >= 3:  # a contact cut by the clip has no known phase
-                    i0 = int(round(p0 * (b - a)))
-                    out.append((side, int(a) + i0, max(2, int(round(p1 * (b - a))) - i0 + 1)))
-        return out
+        return [(side, *stance_window(a, b)) for side in (0, 1) for a, b in _runs(self.contacts[:, side])
+                if a > 0 and b < self.F and b - a >= 3]  # a contact cut by the clip has no known phase
 
     def _slides(self, cams, tr):
         """Along-track velocity of each planted ankle (mid-stance, windows

@@ -52,10 +52,10 @@ def stance_ankle_motion(joints_m, contacts, fps, window=None):
     arrays (one entry per contact).
     """
     from ..kinematics import _runs
-    from ..posterior import STANCE_WINDOW
+    from ..posterior import STANCE_WINDOW, stance_window
     from ..skeleton import JOINT_INDEX
 
-    p0, p1 = STANCE_WINDOW if window is None else window
+    window = STANCE_WINDOW if window is None else window
     X = np.asarray(joints_m, float)
     speed = np.linalg.norm(X[-1, 0, :2] - X[0, 0, :2]) / ((len(X) - 1) / fps)
     out = {"early_travel_cm": [], "slide": [], "rise_cm": []}
@@ -66,10 +66,9 @@ def stance_ankle_motion(joints_m, contacts, fps, window=None):
             s = np.linspace(0.0, 1.0, b - a)  # stance fraction of frames a..b-1
             x, z = X[a:b, j, 0], X[a:b, j, 2]
             out["early_travel_cm"].append(100 * (np.interp(0.15, s, x) - x[0]))
-            i0, i1 = a + int(round(p0 * (b - a))), a + int(round(p1 * (b - a)))
-            i1 = max(i1, i0 + 2)
-            out["slide"].append(np.polyfit(np.arange(i1 - i0 + 1), X[i0:i1 + 1, j, 0], 1)[0] * fps / speed)
-            out["rise_cm"].append(100 * (np.interp(p1, s, z) - z.min()))
+            i0, n = stance_window(a, b, window)  # the frames the posterior scores
+            out["slide"].append(np.polyfit(np.arange(n), X[i0:i0 + n, j, 0], 1)[0] * fps / speed)
+            out["rise_cm"].append(100 * (np.interp(window[1], s, z) - z.min()))
     return {k: np.array(v) for k, v in out.items()}
 
 
