@@ -70,8 +70,7 @@ class LaneDetectorConfig:
     merge_angle_deg: float = 1.0
     merge_dist_px: float = 4.0
     profile_step_px: float = 8.0
-    #: how far (px, across the line) the measurement looks for a line's centre around a rough line
-    profile_half_px: float = 10.0
+    profile_sample_px: float = 0.5
     vp_inlier_deg: float = 0.35
     curved_sagitta_px: float = 0.8
     curved_curvature_per_px: float = 3e-5
@@ -293,92 +292,63 @@ def _merge_segments(segs, cfg):
     return [np.concatenate(c[1]) for c in clusters]
 
 
-#: BGR weights of the luma (Rec. 601) in which lines are measured: JPEG and broadcast codecs keep
-#: luma at full resolution, while the colour channels are subsampled and shifted (the minimum of
-#: B, G, R, which finds white lines best, moves a measured centre by ~0.01 px after JPEG)
-_LUMA_BGR = np.array([0.114, 0.587, 0.299], np.float32)
-
-
 def _measure_lines(image_bgr, endpoint_sets, cfg):
-    """Sub-pixel centre points along rough lines: luma centroids across the line on the pixel grid.
+    """Sub-pixel centre points along rough lines via perpendicular intensity profiles.
 
-    Every ``profile_step_px`` along a rough line, the pixels of one image column (a line
-    closer to horizontal) or row (closer to vertical) within ``profile_half_px`` of it
-    are read without interpolation, and their background-subtracted centroid is the line
-    centre there.  The discrete centroid of a blurred line is free of the sub-pixel
-    "pixel locking" that interpolated, resampled profiles show (the ~0.5 px-periodic bias
-    of a centroid over bilinear samples does not average out along lines whose slope
-    barely changes, e.g. a camera square-on to the straight, and it tilts them); the
-    centre of a straight band's cross-section in a column lies on its centre line, so the
-    points need no correction.  Returns one (N_i, 2) array (or None when too little is
-    seen) per line.
+    All lines' profiles are sampled in one ``cv2.remap`` call and processed
+    together; returns one (N_i, 2) array (or None when too little is seen) per line.
     """
-    h, w = image_bgr.shape[:2]
-    out = []
+    half = 10.0
+    offs = np.arange(-half, half + cfg.profile_sample_px / 2, cfg.profile_sample_px)
+    starts, normals, samples = [], [], []
     for endpoints in endpoint_sets:
-        endpoints = np.asarray(endpoints, float)
-        a, b, c = _fit_line(endpoints)
-        horizontal = abs(b) >= abs(a)  # normal mostly vertical: read columns
-        ax, nrm = (0, b) if horizontal else (1, a)
-        lo, hi = endpoints[:, ax].min(), endpoints[:, ax].max()
-        major = np.arange(np.ceil(lo), hi, cfg.profile_step_px)
-        if len(major) == 0:
-            out.append(None)
-            continue
-        # the predicted crossing of each column (row), and the pixels around it
-        pred = -((a * major if horizontal else b * major) + c) / nrm
-        half = int(np.ceil(cfg.profile_half_px / abs(nrm)))
-        offs = np.arange(-half, half + 1)
-        base = np.round(pred).astype(np.int64)
-        minor = base[:, None] + offs[None, :]
-        major_i = np.broadcast_to(major.astype(np.int64)[:, None], minor.shape)
-        X, Y = (major_i, minor) if horizontal else (minor, major_i)
-        inside = (X.min(1) >= 0) & (Y.min(1) >= 0) & (X.max(1) <= w - 1) & (Y.max(1) <= h - 1)
-        prof = image_bgr[np.clip(Y, 0, h - 1), np.clip(X, 0, w - 1)] @ _LUMA_BGR
-        off, ok = _profile_centroids(prof, offs.astype(float), cfg.threshold * 0.6)
-        ok &= inside
-        pts = np.empty((len(major), 2))
-        pts[:, ax] = major
-        pts[:, 1 - ax] = base + off
-        out.append(pts[ok] if ok.sum() >= 4 else None)
-    return out
-
-
-def _profile_centroids(prof, offs, min_contrast):
-    """Background-subtracted centroids of bright lines in profiles (N, M) sampled at ``offs``.
-
-    The background is taken per side of the peak (the two sides may differ: infield and
-    track), from the outer two samples.  The centroid runs over the contiguous stretch
-    around the peak above 15 % of its contrast (a neighbouring line must not pull it),
-    widened by one sample on each side and kept unclipped there, so that cutting the
-    blurred flanks at a threshold does not lock the centre to the pixel grid.
-
-    Returns the offsets (N,) and whether each profile saw a line (contrast above
-    ``min_contrast``, widened stretch inside the profile).
-
-    >>> prof = np.array([[10, 10, 10, 60, 110, 60, 10, 10.0]])
-    >>> off, ok = _profile_centroids(prof, np.arange(8.0) - 4, 20)
-    >>> float(off[0]), bool(ok[0])
-    (0.0, True)
-    """
-    n_side = 2
-    cols = np.arange(prof.shape[1])[None, :]
-    am = np.argmax(prof, axis=1)[:, None]
-    left_bg = prof[:, :n_side].mean(1)[:, None]
-    right_bg = prof[:, -n_side:].mean(1)[:, None]
-    base = np.where(cols < am, left_bg, right_bg)
+        line = _fit_line(np.asarray(endpoints, float))
+        n = line[:2]
+        d = np.array([-n[1], n[0]])
+        t = endpoints @ d
+        ts = np.arange(t.min(), t.max(), cfg.profile_step_px)
+        pts = -line[2] * n + ts[:, None] * d
+        starts.append(len(pts))
+        normals.append(np.repeat(n[None], len(pts), 0))
+        samples.append(pts)
+    if not samples or sum(starts) == 0:
+        return [None] * len(starts)
+    pts = np.concatenate(samples)
+    nrm = np.concatenate(normals)
+    grid = pts[:, None, :] + offs[None, :, None] * nrm[:, None, :]
+    mx = np.ascontiguousarray(grid[..., 0], dtype=np.float32)
+    my = np.ascontiguousarray(grid[..., 1], dtype=np.float32)
+    # per-pixel minimum over B, G, R of the bilinearly sampled profile (white = bright in all)
+    rgb = cv2.remap(image_bgr, mx, my, cv2.INTER_LINEAR, borderMode=cv2.BORDER_CONSTANT, borderValue=0)
+    prof = np.minimum(np.minimum(rgb[..., 0], rgb[..., 1]), rgb[..., 2]).astype(np.float32)
+    # background level per side of the peak: the two sides may differ (infield vs track)
+    am = np.argmax(prof, axis=1)
+    cols = np.arange(len(offs))[None, :]
+    nb = max(2, int(round(2.0 / cfg.profile_sample_px)))  # the outer 2 px on each side
+    left_bg = prof[:, :nb].mean(1)[:, None]
+    right_bg = prof[:, -nb:].mean(1)[:, None]
+    base = np.where(cols < am[:, None], left_bg, right_bg)
+    # weights ~ line coverage on both sides: normalise by the contrast on each side
     top = prof.max(axis=1)[:, None]
     peak = (top - np.minimum(left_bg, right_bg))[:, 0]
-    # weights ~ line coverage on both sides: normalise by the contrast on each side
-    wts = (prof - base) / np.maximum(top - base, 1e-6) * peak[:, None]
+    wts = np.clip((prof - base) / np.maximum(top - base, 1e-6), 0, None) * peak[:, None]
+    h, w = image_bgr.shape[:2]
+    valid = (peak > cfg.threshold * 0.6) & (mx.min(1) >= 0) & (my.min(1) >= 0) \
+        & (mx.max(1) <= w - 1) & (my.max(1) <= h - 1)
+    # centroid over the contiguous run around the peak only (a neighbouring line, or the
+    # brighter of two differently coloured backgrounds, must not pull it; a hard half-peak
+    # cut would bias thin, anti-aliased lines)
     low = wts <= 0.15 * peak[:, None]
-    left = np.where(low & (cols < am), cols, -1).max(1) - 1
-    right = np.where(low & (cols > am), cols, prof.shape[1]).min(1) + 1
+    left = np.where(low & (cols < am[:, None]), cols, -1).max(1)
+    right = np.where(low & (cols > am[:, None]), cols, len(offs)).min(1)
     wts = np.where((cols > left[:, None]) & (cols < right[:, None]), wts, 0.0)
     with np.errstate(invalid="ignore", divide="ignore"):
         off = (wts * offs).sum(1) / wts.sum(1)
-    ok = (peak > min_contrast) & (left >= 0) & (right <= prof.shape[1] - 1) & np.isfinite(off)
-    return off, ok
+    centre = pts + off[:, None] * nrm
+    out = []
+    for sl_pts, sl_ok in zip(np.split(centre, np.cumsum(starts)[:-1]), np.split(valid, np.cumsum(starts)[:-1])):
+        out.append(sl_pts[sl_ok] if sl_ok.sum() >= 4 else None)
+    return out
 
 
 def _median(x):
@@ -391,17 +361,12 @@ def _median(x):
     return 0.5 * float(part[k - 1] + part[k])
 
 
-def _robust_fit(points, iters=3, min_scale_px=0.1):
-    """Line fit that drops points beyond 3.5 robust sd (MAD, at least ``min_scale_px``).
-
-    A clean line's centres scatter by ~0.05 px; where the athlete's legs or shadow
-    cross it they move by 0.2-1 px, which a coarser floor would keep.
-    """
+def _robust_fit(points, iters=3):
     line = _fit_line(points)
     keep = np.ones(len(points), bool)
     for _ in range(iters):
         r = np.abs(points @ line[:2] + line[2])
-        s = max(1.4826 * _median(r[keep]), min_scale_px)
+        s = max(1.4826 * _median(r[keep]), 0.3)
         keep = r < 3.5 * s
         if keep.sum() < 4:
             break

@@ -54,6 +54,12 @@ class TrackConfig:
         alone takes the last frames before touchdown (ankle still ~0.2 m up) for contact;
         this made contacts 50-80 ms too long for high and telephoto views.  0.06 m was
         chosen on the benchmark suite (``reports/bench_posterior.md``); None disables it.
+    max_rejected_run : int
+        Contacts whose innovation fails the filter's 4-sigma gate are skipped, but after
+        this many in a row the next one re-starts the filter from it (position and
+        velocity as uncertain as at the start): once the filter's velocity is wrong,
+        every later footprint fails the gate, and without a restart the track coasts at
+        that velocity to the end of the clip.
     """
 
     accel_std_mps2: tuple = (1.5, 0.6)
@@ -62,6 +68,7 @@ class TrackConfig:
     min_contact_frames: int = 2
     max_gap_s: float = 0.1
     contact_height_margin_m: float | None = 0.06
+    max_rejected_run: int = 2
 
 
 @dataclass(frozen=True)
@@ -371,7 +378,8 @@ def _track_from_contacts(ankles, contacts, fps, config):
     kf.P = np.diag([4.0, 4.0, float(np.clip(sd0, 0.05, 0.7)) ** 2, 0.1**2])
     xs, Ps = np.zeros((F, 4)), np.zeros((F, 4, 4))
     loglik = 0.0
-    n_rejected = 0
+    n_rejected = run_rejected = 0
+    P0 = kf.P.copy()
     for i in range(F):
         if i > 0:
             kf.predict()
@@ -381,12 +389,20 @@ def _track_from_contacts(ankles, contacts, fps, config):
             y = meas[i] - kf.H @ kf.x
             S = kf.H @ kf.P @ kf.H.T + kf.R
             nis = float(y @ np.linalg.solve(S, y))
-            if nis > 16.0 and i != keys[0]:
+            if nis > 16.0 and i != keys[0] and run_rejected < config.max_rejected_run:
                 n_rejected += 1
+                run_rejected += 1
                 loglik += -0.5 * 16.0 - 0.5 * float(np.log(np.linalg.det(2 * np.pi * S)))
             else:
-                kf.update(meas[i])
-                loglik += float(kf.log_likelihood)
+                if nis > 16.0 and i != keys[0]:
+                    # a run of rejections: the filter, not the footprints, went astray
+                    loglik += -0.5 * 16.0 - 0.5 * float(np.log(np.linalg.det(2 * np.pi * S)))
+                    kf.P = P0.copy()
+                    kf.update(meas[i])
+                else:
+                    kf.update(meas[i])
+                    loglik += float(kf.log_likelihood)
+                run_rejected = 0
         xs[i], Ps[i] = kf.x, kf.P
     xs, Ps, _, _ = kf.rts_smoother(xs, Ps)
     return GroundTrack(position_m=xs[:, [0, 2]], velocity_mps=xs[:, [1, 3]], cov=Ps, contacts=contacts,
