@@ -851,10 +851,9 @@ def _assign_track_ids(fl, ref, next_id, shift=(0.0, 0.0)):
                 if cost < best_cost:
                     best, best_cost = pairs, cost
             if best is not None and best_cost < 0.35 * spacing:
+                for k, j in best:
+                    ids[k] = ref.lines[j].track_id
                 break
-        if best is not None and best_cost < 0.35 * spacing:
-            for k, j in best:
-                ids[k] = ref.lines[j].track_id
     for k in range(len(ids)):
         if ids[k] is None:
             ids[k] = next_id

@@ -378,7 +378,7 @@ def _track_from_contacts(ankles, contacts, fps, config):
     kf.P = np.diag([4.0, 4.0, float(np.clip(sd0, 0.05, 0.7)) ** 2, 0.1**2])
     xs, Ps = np.zeros((F, 4)), np.zeros((F, 4, 4))
     loglik = 0.0
-    n_rejected = run_rejected = 0
+    run_rejected = 0
     P0 = kf.P.copy()
     for i in range(F):
         if i > 0:
@@ -389,19 +389,18 @@ def _track_from_contacts(ankles, contacts, fps, config):
             y = meas[i] - kf.H @ kf.x
             S = kf.H @ kf.P @ kf.H.T + kf.R
             nis = float(y @ np.linalg.solve(S, y))
-            if nis > 16.0 and i != keys[0] and run_rejected < config.max_rejected_run:
-                n_rejected += 1
-                run_rejected += 1
+            if nis > 16.0 and i != keys[0]:
                 loglik += -0.5 * 16.0 - 0.5 * float(np.log(np.linalg.det(2 * np.pi * S)))
-            else:
-                if nis > 16.0 and i != keys[0]:
+                if run_rejected < config.max_rejected_run:
+                    run_rejected += 1
+                else:
                     # a run of rejections: the filter, not the footprints, went astray
-                    loglik += -0.5 * 16.0 - 0.5 * float(np.log(np.linalg.det(2 * np.pi * S)))
                     kf.P = P0.copy()
                     kf.update(meas[i])
-                else:
-                    kf.update(meas[i])
-                    loglik += float(kf.log_likelihood)
+                    run_rejected = 0
+            else:
+                kf.update(meas[i])
+                loglik += float(kf.log_likelihood)
                 run_rejected = 0
         xs[i], Ps[i] = kf.x, kf.P
     xs, Ps, _, _ = kf.rts_smoother(xs, Ps)
