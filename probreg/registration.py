@@ -476,13 +476,17 @@ def register_frames(frame_lanes, image_size, forward_px=(1.0, 0.0), lane_width_m
                             image_size=tuple(image_size), lane_width_m=lane_width_m)
 
 
-def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(), smooth=True):
+def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(), smooth=True,
+                  mask_athlete=True):
     """Detect lanes in every frame of a clip and build the per-frame families.
 
-    Frames that cannot be read get status ``bad_image``; nothing raises for bad content.
+    With ``mask_athlete`` and the clip's keypoints, line evidence near the athlete is
+    ignored (:func:`probreg.lanes.athlete_mask`).  Frames that cannot be read get status
+    ``bad_image``; nothing raises for bad content.
     """
+    kp = clip.keypoints_px if mask_athlete else None
     fls = [replace(fl, image_size=clip.image_size) if fl.status == "bad_image" else fl
-           for fl in track_lanes(iter_frames(clip), config)]
+           for fl in track_lanes(iter_frames(clip), config, keypoints_px=kp)]
     return register_frames(fls, clip.image_size, (1.0, 0.0), clip.lane_width_m, smooth=smooth)
 
 
