@@ -98,6 +98,36 @@ class FamilyMember:
         return Camera(K=K, R=self.R, C=C, dist=np.zeros(5) if dist is None else dist, image_size=(w, h))
 
 
+def _null_vector_2(M):
+    """Least-squares null vectors of stacked (F, m, 2) matrices, in closed form.
+
+    The eigenvector of the smallest eigenvalue of the 2 x 2 normal matrix (a batched
+    SVD costs a LAPACK call per matrix).  Returns the unit vectors (F, 2) (sign
+    arbitrary) and the ratio of the smallest to the largest singular value, the
+    smallest taken as ``|M v|`` (accurate even where it is tiny).
+
+    >>> v, r = _null_vector_2(np.array([[[1.0, 2.0], [2.0, 4.0]]]))
+    >>> np.round(np.abs(v[0]) * np.sqrt(5), 12).tolist(), float(np.round(r[0], 12))
+    ([2.0, 1.0], 0.0)
+    """
+    a = np.einsum("fm,fm->f", M[..., 0], M[..., 0])
+    b = np.einsum("fm,fm->f", M[..., 0], M[..., 1])
+    c = np.einsum("fm,fm->f", M[..., 1], M[..., 1])
+    half_gap = np.hypot(0.5 * (a - c), b)
+    lam_max = 0.5 * (a + c) + half_gap
+    lam_min = 0.5 * (a + c) - half_gap
+    # two expressions for the same eigenvector; take the one with the larger norm
+    v1 = np.stack([b, lam_min - a], -1)
+    v2 = np.stack([lam_min - c, b], -1)
+    n1, n2 = np.linalg.norm(v1, axis=-1), np.linalg.norm(v2, axis=-1)
+    v = np.where((n1 >= n2)[:, None], v1, v2)
+    n = np.maximum(n1, n2)
+    # an isotropic (or zero) normal matrix: every direction is as good
+    v = np.where((n > 0)[:, None], v / np.where(n > 0, n, 1.0)[:, None], [[1.0, 0.0]])
+    smallest = np.linalg.norm(np.einsum("fmk,fk->fm", M, v), axis=-1)
+    return v, smallest / np.maximum(np.sqrt(np.maximum(lam_max, 0.0)), 1e-300)
+
+
 class CalibrationFamily:
     """The one-DOF family of cameras consistent with one frame's lane lines.
 
@@ -250,8 +280,7 @@ class CalibrationFamily:
             rows.append(np.stack([s_j0 * dk_m * np.cos(th[:, m]) - s_m0 * dk_j * np.cos(th[:, j]),
                                   s_j0 * dk_m * np.sin(th[:, m]) - s_m0 * dk_j * np.sin(th[:, j])], -1))
         M = np.stack(rows, 1)  # (F, n-2, 2)
-        _, sv, vt = np.linalg.svd(M)
-        cs = vt[:, -1, :]  # (F, 2) null vector = (cos phi, sin phi) up to sign
+        cs, resid = _null_vector_2(M)  # (F, 2) null vector = (cos phi, sin phi) up to sign
         u = cs[:, 0:1] * a + cs[:, 1:2] * b
         cosd = np.sum(wv * u[:, None], -1)  # w_i . u: rays must point down
         flip = np.sum(cosd, -1) > 0
@@ -269,7 +298,6 @@ class CalibrationFamily:
         A = np.where(flipped, A + B * k.max(), A)
         B = np.where(flipped, -B, B)
         h = -self.lane_width_m / B
-        resid = sv[:, -1] / np.maximum(sv[:, 0], 1e-300)
         y_cam = -h * A  # line 0 at y = 0: 0 = y_cam + h * (A + B * 0)
         valid = np.all(cosd < 0, -1) & (h > 0) & np.isfinite(h)
         R = np.stack([r1, ey, u], -1)  # columns: track axes in camera coordinates
@@ -289,10 +317,13 @@ class CalibrationFamily:
 
     def focal_range(self, fov_range_deg=(0.3, 150.0), n=120):
         """Focal lengths (log grid) over which the family exists, with their heights."""
-        w = self.image_size[0]
-        f = np.geomspace(focal_from_fov(fov_range_deg[1], w), focal_from_fov(fov_range_deg[0], w), n)
-        m = self.members(f)
-        return f, m
+        key = (tuple(fov_range_deg), n)
+        cache = self.__dict__.setdefault("_focal_range_cache", {})
+        if key not in cache:  # the family is fixed once built: every parameter solve shares the grid
+            w = self.image_size[0]
+            f = np.geomspace(focal_from_fov(fov_range_deg[1], w), focal_from_fov(fov_range_deg[0], w), n)
+            cache[key] = (f, self.members(f))
+        return cache[key]
 
     def focal_for(self, parameter: "FamilyParameter", value):
         """Solve the focal length at which ``parameter`` takes ``value`` (1-D root finding)."""
@@ -354,24 +385,23 @@ class FamilyParameter(ABC):
         if branch not in ("narrow", "wide"):
             raise CalibrationError(f"branch must be 'narrow' or 'wide', got {branch!r}")
         i = cross[-1] if branch == "narrow" else cross[0]
-        # refine the bracket on finer log grids (vectorised evaluations), then interpolate
+        # one refinement on a finer log grid (a single vectorised evaluation: a call costs
+        # far more than its points) brackets the root to ~4e-3 in log f; inverse cubic
+        # interpolation through the four grid points around it is then exact to ~1e-10
+        # (the grid reaches one step beyond the bracket on each side, so that the
+        # interpolation has its four points wherever the root lies)
         lo, hi = np.log(f[i]), np.log(f[i + 1])
-        # two refinements shrink the bracket to ~5e-5 in log f; the final linear
-        # interpolation is then exact to ~1e-10 (the family is smooth in log f)
-        for _ in range(2):
-            grid = np.linspace(lo, hi, 33)
-            fx = np.exp(grid)
-            mm = family.members(fx)
-            d = np.where(mm["valid"], self.values(family, fx, mm), np.nan) - value
-            ok = np.isfinite(d)
-            c = np.flatnonzero(ok[:-1] & ok[1:] & (np.sign(d[:-1]) != np.sign(d[1:])))
-            if len(c) == 0:
-                break
+        step = (hi - lo) / 16
+        grid = lo + step * np.arange(-1, 18)
+        fx = np.exp(grid)
+        mm = family.members(fx)
+        d = np.where(mm["valid"], self.values(family, fx, mm), np.nan) - value
+        ok = np.isfinite(d)
+        c = np.flatnonzero(ok[:-1] & ok[1:] & (np.sign(d[:-1]) != np.sign(d[1:])))
+        c = c[(c >= 1) & (c <= 16)]  # crossings inside the bracket only
+        if len(c):
             j = c[-1] if branch == "narrow" else c[0]
-            lo, hi = grid[j], grid[j + 1]
-            d_lo, d_hi = d[j], d[j + 1]
-        else:
-            return float(np.exp(lo + (hi - lo) * d_lo / (d_lo - d_hi)))
+            return float(np.exp(_inverse_interpolate(grid, d, j)))
 
         def fn(logf):
             fx = np.exp(logf)
@@ -379,6 +409,31 @@ class FamilyParameter(ABC):
             return float(self.values(family, np.array([fx]), mm)[0] - value)
 
         return float(np.exp(brentq(fn, lo, hi, xtol=1e-13, rtol=1e-13)))
+
+
+def _inverse_interpolate(x, y, j):
+    """Root of ``y(x)`` bracketed by samples ``j`` and ``j + 1``: inverse cubic
+    interpolation through the samples ``j - 1 .. j + 2`` where they exist and are
+    monotone, else linear.
+
+    >>> x = np.linspace(0.0, 1.0, 17)  # root of exp(x) - 2 at log(2) = 0.693...
+    >>> bool(abs(_inverse_interpolate(x, np.exp(x) - 2.0, 11) - np.log(2.0)) < 1e-6)
+    True
+    """
+    if y[j] == 0.0:
+        return float(x[j])
+    linear = x[j] + (x[j + 1] - x[j]) * y[j] / (y[j] - y[j + 1])
+    if j < 1 or j + 2 >= len(x):
+        return float(linear)
+    xs, ys = x[j - 1:j + 3], y[j - 1:j + 3]
+    dy = np.diff(ys)
+    if not (np.all(np.isfinite(ys)) and (np.all(dy > 0) or np.all(dy < 0))):
+        return float(linear)
+    root = 0.0
+    for i in range(4):
+        others = np.delete(ys, i)
+        root += xs[i] * np.prod(-others / (ys[i] - others))
+    return float(root) if x[j] <= root <= x[j + 1] else float(linear)
 
 
 class HeightParameter(FamilyParameter):

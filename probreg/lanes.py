@@ -30,6 +30,7 @@ Failures are per-frame statuses, never exceptions:
 
 from __future__ import annotations
 
+import functools
 import itertools
 from dataclasses import dataclass, field, replace
 
@@ -67,6 +68,10 @@ class LaneDetectorConfig:
     threshold: int = 45
     hough_threshold: int = 50
     hough_theta_deg: float = 0.75
+    #: share of the line pixels the Hough transform votes with (a fixed pseudo-random
+    #: selection; its threshold scales with it): the transform's time is proportional to
+    #: the points and it only seeds the rough lines, which are measured in the full image
+    hough_point_fraction: float = 0.5
     min_length_frac: float = 0.08
     max_gap_px: int = 12
     merge_angle_deg: float = 1.0
@@ -205,10 +210,6 @@ def _from_unit(u, image_size):
     return np.array([u[0] + c[0] * w, u[1] + c[1] * w, w])
 
 
-def _normalise_line(l):
-    return l / np.hypot(l[0], l[1])
-
-
 def _tls_line(mx, my, cxx, cyy, cxy):
     """Unit-normal line through the centroid ``(mx, my)`` along the direction of largest
     spread of the centred scatter matrix ``[[cxx, cxy], [cxy, cyy]]`` (closed form)."""
@@ -294,9 +295,19 @@ def _near_capsules(points, capsules, reach):
     return np.any(d2 < (r + reach)[None] ** 2, axis=1)
 
 
+_TRIPLE_KERNEL = np.ones((1, 3), np.uint8)
+
+
 def _white_response(gray_min, tophat_px):
     k = cv2.getStructuringElement(cv2.MORPH_RECT, (tophat_px, tophat_px))
     return cv2.morphologyEx(gray_min, cv2.MORPH_TOPHAT, k)
+
+
+@functools.lru_cache(maxsize=8)
+def _vote_selection(shape, fraction):
+    """A fixed pseudo-random 0/255 mask selecting ``fraction`` of the pixels (same every call)."""
+    rng = np.random.default_rng(20231)
+    return np.where(rng.random(shape) < fraction, 255, 0).astype(np.uint8)
 
 
 def _segments(img_bgr, cfg):
@@ -304,8 +315,10 @@ def _segments(img_bgr, cfg):
     scale = min(1.0, cfg.work_width_px / w)
     small = cv2.resize(img_bgr, (int(round(w * scale)), int(round(h * scale))),
                        interpolation=cv2.INTER_AREA) if scale < 1 else img_bgr
-    b, g, r = cv2.split(small)
-    gmin = cv2.min(cv2.min(b, g), r)
+    # minimum of B, G, R per pixel: an erosion across each interleaved (B, G, R) triple,
+    # read at the G positions (one pass, no channel split)
+    gmin = np.ascontiguousarray(
+        cv2.erode(small.reshape(small.shape[0], -1), _TRIPLE_KERNEL, borderType=cv2.BORDER_REPLICATE)[:, 1::3])
     resp = _white_response(gmin, cfg.tophat_px)
     _, mask = cv2.threshold(resp, cfg.threshold, 255, cv2.THRESH_BINARY)
     # thin wide lines to their ridge (local maximum across rows or across columns): the
@@ -315,15 +328,21 @@ def _segments(img_bgr, cfg):
     ridge[1:-1, :] = (r[1:-1] >= r[:-2]) & (r[1:-1] > r[2:])
     ridge[:, 1:-1] |= (r[:, 1:-1] >= r[:, :-2]) & (r[:, 1:-1] > r[:, 2:])
     mask = cv2.bitwise_and(mask, mask, mask=ridge.view(np.uint8))
-    segs = cv2.HoughLinesP(mask, 1, np.radians(cfg.hough_theta_deg), cfg.hough_threshold,
+    n_mask = int(np.count_nonzero(mask))
+    frac = float(np.clip(cfg.hough_point_fraction, 0.0, 1.0))
+    threshold = cfg.hough_threshold
+    if frac < 1.0:
+        mask = cv2.bitwise_and(mask, _vote_selection(mask.shape, frac))
+        threshold = max(2, int(round(threshold * frac)))
+    segs = cv2.HoughLinesP(mask, 1, np.radians(cfg.hough_theta_deg), threshold,
                            minLineLength=cfg.min_length_frac * small.shape[1], maxLineGap=cfg.max_gap_px)
     if segs is None:
-        return np.zeros((0, 4)), int(np.count_nonzero(mask))
+        return np.zeros((0, 4)), n_mask
     segs = segs.reshape(-1, 4).astype(float) / scale
     if len(segs) > cfg.max_segments:
         keep = np.argsort(-np.hypot(segs[:, 2] - segs[:, 0], segs[:, 3] - segs[:, 1]))[:cfg.max_segments]
         segs = segs[keep]
-    return segs, int(np.count_nonzero(mask))
+    return segs, n_mask
 
 
 def _merge_segments(segs, cfg):
@@ -376,36 +395,49 @@ def _measure_lines(image_bgr, endpoint_sets, cfg, exclude=None):
     little is seen) per line.
     """
     h, w = image_bgr.shape[:2]
-    out = []
-    for endpoints in endpoint_sets:
+    # per line: reading direction, profile half-width and the columns (rows) it crosses;
+    # lines alike in both are measured in one batch (one gather, one centroid pass)
+    pixels = image_bgr.reshape(-1, 3)  # flat indexing: a 1-D gather is faster than a 2-D one
+    plans, groups = [], {}
+    for k, endpoints in enumerate(endpoint_sets):
         endpoints = np.asarray(endpoints, float)
         a, b, c = _fit_line(endpoints)
-        horizontal = abs(b) >= abs(a)  # normal mostly vertical: read columns
+        horizontal = bool(abs(b) >= abs(a))  # normal mostly vertical: read columns
         ax, nrm = (0, b) if horizontal else (1, a)
         lo, hi = endpoints[:, ax].min(), endpoints[:, ax].max()
         major = np.arange(np.ceil(lo), hi, cfg.profile_step_px)
         if len(major) == 0:
-            out.append(None)
+            plans.append(None)
             continue
         # the predicted crossing of each column (row), and the pixels around it
         pred = -((a * major if horizontal else b * major) + c) / nrm
         half = int(np.ceil(cfg.profile_half_px / abs(nrm)))
+        plans.append((ax, major, np.round(pred).astype(np.int64)))
+        groups.setdefault((horizontal, half), []).append(k)
+    points, ok_all = [None] * len(plans), [None] * len(plans)
+    for (horizontal, half), members in groups.items():
+        major = np.concatenate([plans[k][1] for k in members])
+        base = np.concatenate([plans[k][2] for k in members])
         offs = np.arange(-half, half + 1)
-        base = np.round(pred).astype(np.int64)
         minor = base[:, None] + offs[None, :]
         major_i = np.broadcast_to(major.astype(np.int64)[:, None], minor.shape)
         X, Y = (major_i, minor) if horizontal else (minor, major_i)
         inside = (X.min(1) >= 0) & (Y.min(1) >= 0) & (X.max(1) <= w - 1) & (Y.max(1) <= h - 1)
-        prof = image_bgr[np.clip(Y, 0, h - 1), np.clip(X, 0, w - 1)] @ _LUMA_BGR
+        flat_idx = (np.clip(Y, 0, h - 1) * w + np.clip(X, 0, w - 1)).ravel()
+        prof = np.take(pixels, flat_idx, axis=0).reshape(minor.shape + (3,)) @ _LUMA_BGR
         off, ok = _profile_centroids(prof, offs.astype(float), cfg.threshold * 0.6)
         ok &= inside
+        ax = 0 if horizontal else 1
         pts = np.empty((len(major), 2))
         pts[:, ax] = major
         pts[:, 1 - ax] = base + off
         if exclude is not None:
             ok &= ~_near_capsules(pts, exclude, cfg.profile_half_px)
-        out.append(pts[ok] if ok.sum() >= 4 else None)
-    return out
+        splits = np.cumsum([len(plans[k][1]) for k in members])[:-1]
+        for k, p_k, ok_k in zip(members, np.split(pts, splits), np.split(ok, splits)):
+            points[k], ok_all[k] = p_k, ok_k
+    return [None if plan is None or ok_all[k].sum() < 4 else points[k][ok_all[k]]
+            for k, plan in enumerate(plans)]
 
 
 def _profile_centroids(prof, offs, min_contrast):
@@ -466,7 +498,10 @@ def _robust_fit(points, iters=3, min_scale_px=0.1):
     for _ in range(iters):
         r = np.abs(points @ line[:2] + line[2])
         s = max(1.4826 * _median(r[keep]), min_scale_px)
-        keep = r < 3.5 * s
+        new_keep = r < 3.5 * s
+        if np.array_equal(new_keep, keep):
+            break  # the same points again: the same line
+        keep = new_keep
         if keep.sum() < 4:
             break
         line = _fit_line(points[keep])
@@ -510,29 +545,34 @@ def _pencil_fit(scatter, vp_unit):
     For each line, minimises the sum of squared point-to-line distances over
     the lines through ``vp_unit`` (a generalised 2x2 eigenproblem in the
     pencil's basis; closed form, also for a vanishing point at infinity).
+    ``vp_unit`` may also be a stack (K, 3) of points, fitted in one pass.
 
     Returns
     -------
-    lines : ndarray (n, 3)
+    lines : ndarray (n, 3), or (K, n, 3)
         Lines in the scaled frame, normalised so that ``hypot(l0, l1) = 1``.
-    sq : ndarray (n,)
+    sq : ndarray (n,), or (K, n)
         Sum of squared distances of each line's points (scaled-frame units).
     """
-    v0, v1, v2 = vp_unit / np.sqrt(vp_unit @ vp_unit)
+    V = np.asarray(vp_unit, float)
+    single = V.ndim == 1
+    V = np.atleast_2d(V)
+    V = V / np.sqrt(np.sum(V * V, -1, keepdims=True))
+    v0, v1, v2 = V[:, 0], V[:, 1], V[:, 2]
     # orthonormal basis (e1, e2) of the lines through v: e1 = v x axis, e2 = v x e1
-    if abs(v0) < 0.9:
-        e1 = np.array([0.0, v2, -v1])
-    else:
-        e1 = np.array([-v2, 0.0, v0])
-    e1 /= np.sqrt(e1 @ e1)
-    e2 = np.array([v1 * e1[2] - v2 * e1[1], v2 * e1[0] - v0 * e1[2], v0 * e1[1] - v1 * e1[0]])
-    E = np.column_stack([e1, e2])  # (3, 2): l = E @ x for the lines through v
-    SE = scatter @ E  # (n, 3, 2)
-    a = SE[:, :, 0] @ e1
-    b = SE[:, :, 1] @ e1
-    cc = SE[:, :, 1] @ e2
-    Bm = E[:2].T @ E[:2]  # metric of hypot(l0, l1)^2 in the basis
-    p, q, r = Bm[0, 0], Bm[0, 1], Bm[1, 1]
+    zero = np.zeros_like(v0)
+    e1 = np.where((np.abs(v0) < 0.9)[:, None], np.stack([zero, v2, -v1], -1), np.stack([-v2, zero, v0], -1))
+    e1 /= np.sqrt(np.sum(e1 * e1, -1, keepdims=True))
+    e2 = cross3(V, e1)
+    # quadratic forms of the scatter in the basis: a = e1' S e1, b = e2' S e1, cc = e2' S e2
+    Se1 = np.einsum("nij,kj->kni", scatter, e1)  # (K, n, 3)
+    a = np.einsum("kni,ki->kn", Se1, e1)
+    b = np.einsum("kni,ki->kn", Se1, e2)
+    cc = np.einsum("ki,nij,kj->kn", e2, scatter, e2)
+    # metric of hypot(l0, l1)^2 in the basis
+    p = (e1[:, 0] ** 2 + e1[:, 1] ** 2)[:, None]
+    q = (e1[:, 0] * e2[:, 0] + e1[:, 1] * e2[:, 1])[:, None]
+    r = (e2[:, 0] ** 2 + e2[:, 1] ** 2)[:, None]
     qa = p * r - q * q
     qb = a * r + cc * p - 2 * b * q
     qc = a * cc - b * b
@@ -542,10 +582,11 @@ def _pencil_fit(scatter, vp_unit):
     lam = np.maximum(lam, 0.0)
     x1 = np.stack([-(b - lam * q), a - lam * p], -1)
     x2 = np.stack([cc - lam * r, -(b - lam * q)], -1)
-    x = np.where((np.sum(x1**2, -1) >= np.sum(x2**2, -1))[:, None], x1, x2)
-    lines = x @ E.T
-    nrm = np.hypot(lines[:, 0], lines[:, 1])
-    return lines / np.maximum(nrm, 1e-300)[:, None], lam
+    x = np.where((np.sum(x1**2, -1) >= np.sum(x2**2, -1))[..., None], x1, x2)  # (K, n, 2)
+    lines = x[..., 0:1] * e1[:, None, :] + x[..., 1:2] * e2[:, None, :]
+    nrm = np.hypot(lines[..., 0], lines[..., 1])
+    lines = lines / np.maximum(nrm, 1e-300)[..., None]
+    return (lines[0], lam[0]) if single else (lines, lam)
 
 
 def lines_through_point(point_sets, vp_unit, image_size):
@@ -579,13 +620,17 @@ def lines_through_point(point_sets, vp_unit, image_size):
     return lines, np.split(r, np.cumsum(sizes)[:-1])
 
 
-def _refine_vp(point_sets, vp_unit0, image_size, iterations=8):
+def _refine_vp(point_sets, vp_unit0, image_size, iterations=20):
     """Least-squares vanishing point (2 DOF on the sphere) with covariance of the unit vector.
 
     Minimises the sum of squared point-to-line distances (px) over the
     vanishing point, each line being re-fitted through it (:func:`_pencil_fit`
     on precomputed scatter matrices, so one evaluation costs O(lines)).
-    Newton's method on the tangent plane with a central-difference Hessian.
+    Newton's method on the tangent plane with a central-difference Hessian,
+    until the next Newton step's predicted decrease is negligible.  (Nearly
+    parallel lines make the cost very flat along the pencil, and not quadratic
+    there: a few steps are needed, and a stopping rule that judged the step
+    just taken stopped up to one standard deviation short of the minimum.)
     """
     _, s = _scale_frame(image_size)
     S = _scatter_matrices(point_sets, image_size)
@@ -599,21 +644,33 @@ def _refine_vp(point_sets, vp_unit0, image_size, iterations=8):
         u = v0 + T @ x
         return u / np.linalg.norm(u)
 
+    def costs(X):  # (K, 2) tangent-plane offsets -> (K,) costs, in one batched fit
+        U = v0 + X @ T.T
+        return s * s * np.sum(_pencil_fit(S, U / np.linalg.norm(U, axis=1, keepdims=True))[1], -1)
+
     def cost(x):
-        return s * s * float(np.sum(_pencil_fit(S, unit(x))[1]))
+        return float(costs(x[None])[0])
+
+    # central differences: +h e1, +h e2, -h e1, -h e2, the four diagonal points, and
+    # the point itself (all evaluated in one batched fit)
+    stencil = np.array([[1.0, 0.0], [0.0, 1.0], [-1.0, 0.0], [0.0, -1.0],
+                        [1.0, 1.0], [1.0, -1.0], [-1.0, 1.0], [-1.0, -1.0], [0.0, 0.0]])
 
     def grad_hess(x, h, f0=None):
-        f0 = cost(x) if f0 is None else f0
-        fp = np.array([cost(x + h * e) for e in np.eye(2)])
-        fm = np.array([cost(x - h * e) for e in np.eye(2)])
+        f = costs(x + h * stencil[:8 if f0 is not None else 9])
+        f0 = f[8] if f0 is None else f0
+        fp, fm = f[0:2], f[2:4]
         g = (fp - fm) / (2 * h)
         H = np.diag((fp - 2 * f0 + fm) / h**2)
-        fpp = cost(x + h * np.array([1.0, 1.0]))
-        H[0, 1] = H[1, 0] = (fpp - fp[0] - fp[1] + f0) / h**2
+        H[0, 1] = H[1, 0] = (f[4] - f[5] - f[6] + f[7]) / (4 * h * h)
         return f0, g, H
 
     x = np.zeros(2)
-    h = 1e-6
+    # the step of the differences: the cost is a difference of nearly equal scatter terms,
+    # good to ~1e-8 of itself; with 1e-6 that noise reached the Hessian's flat direction
+    # (nearly parallel lines: 44 % off on a frame of a low view), while steps from 1e-5 to
+    # 1e-3 agree to 0.1 % there (the cost is quadratic over them)
+    h = 1e-4
     f0, g, H = grad_hess(x, h)
     for _ in range(iterations):
         try:
@@ -622,6 +679,8 @@ def _refine_vp(point_sets, vp_unit0, image_size, iterations=8):
             break
         if not np.all(np.isfinite(step)):
             break
+        if -0.5 * (g @ step) < 1e-10 * max(f0, 1e-12):
+            break  # converged: the Newton step's predicted decrease is negligible
         # backtracking: never accept a step that increases the cost
         lam = 1.0
         f_new = cost(x + step)
@@ -632,8 +691,8 @@ def _refine_vp(point_sets, vp_unit0, image_size, iterations=8):
             break
         x = x + lam * step
         f0, g, H = grad_hess(x, h, f_new)
-        if -0.5 * lam * (g @ step) < 1e-9 * max(f0, 1e-12) or np.linalg.norm(lam * step) < 1e-9:
-            break  # converged: the remaining predicted decrease is negligible
+        if np.linalg.norm(lam * step) < 1e-10:
+            break
     v = unit(x)
     n_pts = sum(len(p) for p in point_sets)
     dof = max(n_pts - 2 - len(point_sets), 1)
@@ -658,11 +717,6 @@ def _line_to_scaled(l_px, image_size):
     return np.array([l_px[0] * s, l_px[1] * s, l_px[2] + l_px[0] * c[0] + l_px[1] * c[1]])
 
 
-def _line_from_scaled(l_s, image_size):
-    c, s = _scale_frame(image_size)
-    return _normalise_line(np.array([l_s[0], l_s[1], l_s[2] * s - l_s[0] * c[0] - l_s[1] * c[1]]))
-
-
 def _pencil_coordinate(lines_px, vp_unit, image_size):
     """Angle (rad) of each line within the pencil through the vanishing point.
 
@@ -678,11 +732,6 @@ def _pencil_coordinate(lines_px, vp_unit, image_size):
     gaps = np.diff(np.concatenate([sa, [sa[0] + np.pi]]))
     cut = sa[(np.argmax(gaps) + 1) % len(sa)]
     return np.where(ang < cut, ang + np.pi, ang)
-
-
-def _pencil_line(angle, vp_unit, image_size):
-    e1, e2 = _pencil_basis(vp_unit)
-    return _line_from_scaled(np.cos(angle) * e1 + np.sin(angle) * e2, image_size)
 
 
 def assign_line_indices(pencil_coord, max_missing=2):
@@ -1106,10 +1155,16 @@ def _spacing_residual_px(lanes, coord, idx, vp_unit, image_size):
     _, _, vt = np.linalg.svd(A)
     a, b, c, d = vt[-1]
     pred = (a * k + b) / (c * k + d)
-    sq = []
-    for ln, tp in zip(lanes, pred):
-        lp = _pencil_line(tp, vp_unit, image_size)
-        sq.append(np.mean((ln.points_px @ lp[:2] + lp[2]) ** 2))
+    e1, e2 = _pencil_basis(vp_unit)
+    ls = np.cos(pred)[:, None] * e1 + np.sin(pred)[:, None] * e2  # predicted lines, scaled frame
+    cen, s = _scale_frame(image_size)
+    lp = np.column_stack([ls[:, 0], ls[:, 1], ls[:, 2] * s - ls[:, 0] * cen[0] - ls[:, 1] * cen[1]])
+    lp /= np.hypot(lp[:, 0], lp[:, 1])[:, None]
+    sizes = [len(ln.points_px) for ln in lanes]
+    seg = np.repeat(np.arange(len(lanes)), sizes)
+    pts = np.concatenate([ln.points_px for ln in lanes])
+    r2 = (np.einsum("ij,ij->i", pts, lp[seg, :2]) + lp[seg, 2]) ** 2
+    sq = np.bincount(seg, r2, minlength=len(lanes)) / np.maximum(sizes, 1)
     return float(np.sqrt(np.mean(sq)))
 
 

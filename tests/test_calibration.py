@@ -122,3 +122,38 @@ def test_members_vectorised_over_focal_lengths():
     assert m["R"].shape == (7, 3, 3) and m["height_m"].shape == (7,)
     single = fam.member_at_focal(f[3])
     assert np.isclose(single.height_m, m["height_m"][3]) and np.allclose(single.R, m["R"][3])
+
+
+def test_null_vector_closed_form_matches_svd():
+    """The 2-column least-squares null vector (closed form) is the SVD's, also for one row
+    and for nearly rank-one matrices; the misfit ratio is 0 for one row (three lines), as
+    documented for ``FamilyMember.residual``."""
+    from probreg.calibration import _null_vector_2
+
+    rng = np.random.default_rng(3)
+    for m in (1, 2, 4, 7):
+        M = rng.normal(size=(50, m, 2))
+        M[:10] = M[:10, :, :1] * [1.0, -0.3] + 1e-9 * rng.normal(size=(10, m, 2))  # ~rank one
+        v, ratio = _null_vector_2(M)
+        _, sv, vt = np.linalg.svd(M)
+        assert np.allclose(np.abs(np.sum(v * vt[:, -1], -1)), 1.0, atol=1e-9)
+        if m == 1:  # one row: an exact null vector (three lines always fit)
+            assert np.all(ratio < 1e-15)
+        else:
+            assert np.allclose(ratio, sv[:, -1] / sv[:, 0], rtol=1e-6, atol=1e-15)
+
+
+@pytest.mark.parametrize("branch", ["narrow", "wide"])
+def test_member_solve_hits_the_requested_height(branch):
+    """Noisy lines (no exact camera behind them): the solved member has the requested
+    height to 1e-9, on both branches of the family."""
+    C, T, fov, roll, _ = CASES["typical"]
+    cam = Camera.look_at(C, T, fov_deg=fov, roll_deg=roll)
+    exact = CalibrationFamily.from_camera(cam, line_indices=range(1, 7))
+    rng = np.random.default_rng(5)
+    lines = exact.lines + rng.normal(0, [2e-5, 2e-5, 0.05], exact.lines.shape)
+    fam = CalibrationFamily(exact.vp, lines, exact.indices, exact.image_size,
+                            sample_points_px=exact.samples, forward_px=exact.forward_px)
+    for h in (9.0, 13.0, 15.0):
+        f = HeightParameter().focal_for(fam, h, branch=branch)
+        assert abs(fam.member_at_focal(f).height_m / h - 1) < 1e-9
