@@ -228,12 +228,13 @@ def _refine_on_ray(origins, dirs, root, length, normal, t0, sd_len, sd_lat, iter
     With exact keypoints the sphere term is met exactly; with noisy ones it stops the
     depth from running away where a ray grazes its sphere (the limb almost parallel to
     the image plane), which is where the pure ray-sphere solution is ill-conditioned.
-    Returns points (F, 3) and the sphere misfit ``|q| - L`` (F,).
+    Returns points (F, 3) and the sphere misfit ``|q| - L`` (F,); ``t0`` (and ``root``)
+    may carry leading axes (several starts at once), which the results then have too.
     """
     t = t0.copy()
     dn = np.sum(dirs * normal, -1)
     for _ in range(iters):
-        q = origins + t[:, None] * dirs - root
+        q = origins + t[..., None] * dirs - root
         nq = np.linalg.norm(q, axis=-1)
         qd = np.sum(q * dirs, -1) / np.maximum(nq, 1e-9)
         r1 = (nq - length) / sd_len
@@ -242,8 +243,8 @@ def _refine_on_ray(origins, dirs, root, length, normal, t0, sd_len, sd_lat, iter
         j2 = dn / sd_lat
         step = (r1 * j1 + r2 * j2) / np.maximum(j1 * j1 + j2 * j2, 1e-12)
         t = t - step
-    q = origins + t[:, None] * dirs - root
-    return origins + t[:, None] * dirs, np.linalg.norm(q, axis=-1) - length
+    q = origins + t[..., None] * dirs - root
+    return origins + t[..., None] * dirs, np.linalg.norm(q, axis=-1) - length
 
 
 def _chain_candidates(origins, rays, root, L1, L2, i_mid, i_end, normal, sd_len, sd_lat):
@@ -263,13 +264,17 @@ def _chain_candidates(origins, rays, root, L1, L2, i_mid, i_end, normal, sd_len,
         return tm - h, tm + h
 
     d_mid, d_end = rays[:, i_mid], rays[:, i_end]
-    for a, t0 in enumerate(starts(d_mid, root, L1)):
-        mid, m1 = _refine_on_ray(origins, d_mid, root, L1, normal, t0, sd_len, sd_lat)
-        for b, t1 in enumerate(starts(d_end, mid, L2)):
-            end, m2 = _refine_on_ray(origins, d_end, mid, L2, normal, t1, sd_len, sd_lat)
-            cands[:, 2 * a + b, 0] = mid
-            cands[:, 2 * a + b, 1] = end
-            misfit[:, 2 * a + b] = np.abs(m1) + np.abs(m2)
+    # both starts of the middle joint refined at once (leading axis a), then both starts of
+    # the end joint from each of them (axes b, a)
+    mid, m1 = _refine_on_ray(origins, d_mid, root, L1, normal, np.stack(starts(d_mid, root, L1)),
+                             sd_len, sd_lat)  # (2, F, 3), (2, F)
+    end, m2 = _refine_on_ray(origins, d_end, mid, L2, normal, np.stack(starts(d_end, mid, L2)),
+                             sd_len, sd_lat)  # (2, 2, F, 3), (2, 2, F)
+    for a in range(2):
+        for b in range(2):
+            cands[:, 2 * a + b, 0] = mid[a]
+            cands[:, 2 * a + b, 1] = end[b, a]
+            misfit[:, 2 * a + b] = np.abs(m1[a]) + np.abs(m2[b, a])
     return cands, misfit
 
 
@@ -291,9 +296,13 @@ def _viterbi(emission, transition):
         cost = np.min(tot, axis=-2) + em[t]
     path = np.empty(em.shape[:-1], np.intp)  # (F, ...)
     path[-1] = np.argmin(cost, axis=-1)
+    # backtrack with the batch axes flattened: a plain fancy index per frame
+    flat_back = back.reshape(F, -1, back.shape[-1])
+    flat_path = path.reshape(F, -1)
+    rows = np.arange(flat_back.shape[1])
     for t in range(F - 1, 0, -1):
-        path[t - 1] = np.take_along_axis(back[t], path[t][..., None], -1)[..., 0]
-    return np.moveaxis(path, 0, -1)
+        flat_path[t - 1] = flat_back[t, rows, flat_path[t]]
+    return np.moveaxis(flat_path.reshape(path.shape), 0, -1)
 
 
 def _rotate(v, axis, angle):
@@ -500,17 +509,10 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
         if lag is not None:
             joints, extra["angle_noise"] = smooth_angles_across_strides(
                 joints, fwd, lag, fps, rho=config.angle_noise_rho, smooth_cutoff_hz=config.angle_smooth_cutoff_hz)
-    status = []
-    for i in range(F):
-        if not cams.valid[i]:
-            status.append("no_camera")
-        elif raw_missing[i].all() and missing[i].all():
-            status.append("no_detection")
-        elif np.isnan(joints[i]).any():
-            status.append("partial")
-        elif raw_missing[i].all():
-            status.append("interpolated")
-        else:
-            status.append("ok")
+    # per-frame status, the first that applies (whole-array tests, then one pick per frame)
+    all_raw = raw_missing.reshape(F, -1).all(1)
+    tests = [~cams.valid, all_raw & missing.reshape(F, -1).all(1), np.isnan(joints).reshape(F, -1).any(1), all_raw]
+    names = np.array(["no_camera", "no_detection", "partial", "interpolated", "ok"], object)
+    status = names[np.argmax(np.column_stack(tests + [np.ones(F, bool)]), axis=1)].tolist()
     return LiftResult(joints_track_m=joints, status=status, miss_m=miss, track=track, segments_m=seg,
                       extra=extra)

@@ -242,6 +242,10 @@ def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: Tr
     -------
     GroundTrack
     """
+    from .lifting import CameraArrays, camera_arrays
+
+    if not isinstance(cameras, CameraArrays):  # stacked once, used three times below
+        cameras = camera_arrays(cameras)
     F = len(keypoints_px)
     ankles = cast_ankles(cameras, keypoints_px, ankle_height_m)
     if contacts is not None:
@@ -400,7 +404,9 @@ def _track_from_contacts(ankles, contacts, fps, config):
                     run_rejected = 0
             else:
                 kf.update(meas[i])
-                loglik += float(kf.log_likelihood)
+                # the innovation's Gaussian log-density (what ``kf.log_likelihood`` gives,
+                # from the same y and S, without scipy's per-call overhead)
+                loglik += -0.5 * nis - 0.5 * float(np.log(np.linalg.det(2 * np.pi * S)))
                 run_rejected = 0
         xs[i], Ps[i] = kf.x, kf.P
     xs, Ps, _, _ = kf.rts_smoother(xs, Ps)
