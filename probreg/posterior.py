@@ -60,7 +60,8 @@ from .skeleton import ANGLE_NAMES, JOINT_INDEX
 from .trajectory import fit_ground_track
 
 __all__ = ["ClipModel", "SamplerSettings", "noise_model", "PARAM_NAMES", "angle_bands", "STILLNESS_SYS_SD",
-           "STANCE_WINDOW", "stance_window", "BAND_SCALE", "BAND_CURVATURE_S2", "angle_curvature", "gait_intervals", "GAIT_BAND_SCALE"]
+           "STANCE_WINDOW", "stance_window", "BAND_SCALE", "BAND_CURVATURE_S2", "angle_curvature", "gait_intervals", "GAIT_BAND_SCALE",
+           "NONNEGATIVE_GAIT_SUFFIXES"]
 
 #: Part of every detected contact (fractions of its length) in which the ankle is taken
 #: to stand still.  Real runners' ankles are not still at the ends of a contact: in the
@@ -104,7 +105,7 @@ BAND_CURVATURE_S2 = 0.001
 #: Scale of the bootstrap deviations per angle family, fitted with the curvature term above
 #: for 90 % pooled coverage on the held-out clips of ``probreg bench band-calibration``; the
 #: trunk lean is not smoothed across strides and gets no curvature term.
-BAND_SCALE = {"knee": 1.27, "hip": 1.41, "elbow": 1.81, "trunk_lean": 1.36}
+BAND_SCALE = {"knee": 1.30, "hip": 1.44, "elbow": 1.90, "trunk_lean": 1.39}
 
 
 def angle_curvature(series, fps):
@@ -170,7 +171,10 @@ def angle_bands(angles_point, angles_noisy, fps=None, lo=5.0, hi=95.0, inflation
 
 #: Scale of the bootstrap deviations of the gait numbers, fitted on held-out synthetic clips
 #: for 90 % coverage over all clips and numbers (``probreg bench band-calibration``).
-GAIT_BAND_SCALE = 2.03
+GAIT_BAND_SCALE = 2.25
+
+#: Name endings of the gait numbers that cannot be negative (their intervals stop at zero).
+NONNEGATIVE_GAIT_SUFFIXES = ("_spm", "_m", "_mps", "_s")
 
 
 def gait_intervals(gait_point, gait_noisy, lo=5.0, hi=95.0, inflation=None):
@@ -181,10 +185,18 @@ def gait_intervals(gait_point, gait_noisy, lo=5.0, hi=95.0, inflation=None):
     keypoints: step timing varies there and only there) scaled by ``inflation`` (default
     :data:`GAIT_BAND_SCALE`).
 
+    Numbers that cannot be negative (rates, lengths, speeds, times: names ending in
+    ``_spm``, ``_m``, ``_mps``, ``_s``) have their lower bound cut at zero; a widened
+    interval of a short, uncertain contact time once reached -0.013 s.
+
     >>> g = gait_intervals({"cadence_spm": np.full(9, 170.0)},
     ...                    {"cadence_spm": 170.0 + np.linspace(-4.0, 4.0, 9)}, inflation=1.0)
     >>> [round(float(x), 1) for x in g["cadence_spm"]]
     [170.0, 166.4, 173.6]
+    >>> g = gait_intervals({"contact_time_s": np.full(9, 0.05)},
+    ...                    {"contact_time_s": 0.05 + np.linspace(-0.04, 0.04, 9)}, inflation=2.0)
+    >>> [round(float(x), 3) for x in g["contact_time_s"]]
+    [0.05, 0.0, 0.122]
     """
     import warnings
 
@@ -196,7 +208,10 @@ def gait_intervals(gait_point, gait_noisy, lo=5.0, hi=95.0, inflation=None):
             med = float(np.nanmedian(v))
             w = np.asarray(gait_noisy.get(name, v), float)
             c = np.nanmedian(w)
-            out[name] = (med, med - k * (c - np.nanpercentile(w, lo)), med + k * (np.nanpercentile(w, hi) - c))
+            low = med - k * (c - np.nanpercentile(w, lo))
+            if name.endswith(NONNEGATIVE_GAIT_SUFFIXES):
+                low = max(low, 0.0)
+            out[name] = (med, low, med + k * (np.nanpercentile(w, hi) - c))
     return out
 
 
