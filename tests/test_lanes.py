@@ -320,3 +320,27 @@ def test_hough_on_a_share_of_the_pixels_finds_the_same_lines(cam):
     for a, b in zip(half.lines, full.lines):
         assert a.index == b.index
         assert np.max(np.abs(b.endpoints_px @ a.line[:2] + a.line[2])) < 0.1
+
+
+def test_lines_measured_in_one_batch_equal_lines_measured_alone():
+    """Lines read alike (columns or rows, same profile width) are measured in one gather;
+    a mix of near-horizontal and steep lines must give each line exactly the points it gets
+    when measured on its own."""
+    from probreg.lanes import _measure_lines
+
+    img = np.full((400, 600, 3), 60, np.uint8)
+    cv2.line(img, (20, 100), (580, 130), (235, 235, 235), 3, cv2.LINE_AA)   # near horizontal
+    cv2.line(img, (20, 250), (580, 300), (235, 235, 235), 3, cv2.LINE_AA)   # near horizontal
+    cv2.line(img, (300, 10), (360, 390), (235, 235, 235), 3, cv2.LINE_AA)   # steep: read rows
+    sets = [np.array([[20.0, 100], [580, 130]]), np.array([[20.0, 250], [580, 300]]),
+            np.array([[300.0, 10], [360, 390]])]
+    cfg = LaneDetectorConfig()
+    together = _measure_lines(img, sets, cfg)
+    for s, pts in zip(sets, together):
+        alone = _measure_lines(img, [s], cfg)[0]
+        assert pts is not None and np.array_equal(pts, alone)
+    # and the measured centres lie on the drawn lines
+    for s, pts in zip(sets, together):
+        d = s[1] - s[0]
+        n = np.array([-d[1], d[0]]) / np.hypot(*d)
+        assert np.median(np.abs((pts - s[0]) @ n)) < 0.3
