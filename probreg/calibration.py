@@ -186,6 +186,7 @@ class CalibrationFamily:
             sample_points_px = c - d[:, None] * self.lines[:, :2]
         self.samples = np.asarray(sample_points_px, float)
         self.forward_px = np.asarray(forward_px, float)
+        self._focal_range_cache = {}
 
     # ------------------------------------------------------------------ construction
     @classmethod
@@ -318,12 +319,11 @@ class CalibrationFamily:
     def focal_range(self, fov_range_deg=(0.3, 150.0), n=120):
         """Focal lengths (log grid) over which the family exists, with their heights."""
         key = (tuple(fov_range_deg), n)
-        cache = self.__dict__.setdefault("_focal_range_cache", {})
-        if key not in cache:  # the family is fixed once built: every parameter solve shares the grid
+        if key not in self._focal_range_cache:  # the family is fixed once built: solves share the grid
             w = self.image_size[0]
             f = np.geomspace(focal_from_fov(fov_range_deg[1], w), focal_from_fov(fov_range_deg[0], w), n)
-            cache[key] = (f, self.members(f))
-        return cache[key]
+            self._focal_range_cache[key] = (f, self.members(f))
+        return self._focal_range_cache[key]
 
     def focal_for(self, parameter: "FamilyParameter", value):
         """Solve the focal length at which ``parameter`` takes ``value`` (1-D root finding)."""

@@ -412,12 +412,12 @@ def _measure_lines(image_bgr, endpoint_sets, cfg, exclude=None):
         # the predicted crossing of each column (row), and the pixels around it
         pred = -((a * major if horizontal else b * major) + c) / nrm
         half = int(np.ceil(cfg.profile_half_px / abs(nrm)))
-        plans.append((ax, major, np.round(pred).astype(np.int64)))
+        plans.append((major, np.round(pred).astype(np.int64)))
         groups.setdefault((horizontal, half), []).append(k)
     points, ok_all = [None] * len(plans), [None] * len(plans)
     for (horizontal, half), members in groups.items():
-        major = np.concatenate([plans[k][1] for k in members])
-        base = np.concatenate([plans[k][2] for k in members])
+        major = np.concatenate([plans[k][0] for k in members])
+        base = np.concatenate([plans[k][1] for k in members])
         offs = np.arange(-half, half + 1)
         minor = base[:, None] + offs[None, :]
         major_i = np.broadcast_to(major.astype(np.int64)[:, None], minor.shape)
@@ -433,7 +433,7 @@ def _measure_lines(image_bgr, endpoint_sets, cfg, exclude=None):
         pts[:, 1 - ax] = base + off
         if exclude is not None:
             ok &= ~_near_capsules(pts, exclude, cfg.profile_half_px)
-        splits = np.cumsum([len(plans[k][1]) for k in members])[:-1]
+        splits = np.cumsum([len(plans[k][0]) for k in members])[:-1]
         for k, p_k, ok_k in zip(members, np.split(pts, splits), np.split(ok, splits)):
             points[k], ok_all[k] = p_k, ok_k
     return [None if plan is None or ok_all[k].sum() < 4 else points[k][ok_all[k]]
@@ -610,14 +610,24 @@ def lines_through_point(point_sets, vp_unit, image_size):
     residuals : list of ndarray
         Signed distances (px) of every support point from its line.
     """
-    c, s = _scale_frame(image_size)
     ls, _ = _pencil_fit(_scatter_matrices(point_sets, image_size), vp_unit)
-    lines = np.stack([ls[:, 0], ls[:, 1], ls[:, 2] * s - ls[:, 0] * c[0] - ls[:, 1] * c[1]], -1)
+    lines = _lines_from_scaled(ls, image_size)
+    return lines, _line_residuals(point_sets, lines)
+
+
+def _lines_from_scaled(ls, image_size):
+    """Lines (n, 3) of the scaled frame in pixel coordinates (the normal keeps its length)."""
+    c, s = _scale_frame(image_size)
+    return np.stack([ls[:, 0], ls[:, 1], ls[:, 2] * s - ls[:, 0] * c[0] - ls[:, 1] * c[1]], -1)
+
+
+def _line_residuals(point_sets, lines):
+    """Signed distances (px) of each set's points from its unit-normal line: list of arrays."""
     sizes = [len(p) for p in point_sets]
     seg = np.repeat(np.arange(len(sizes)), sizes)
     pts = np.concatenate(point_sets)
     r = np.einsum("ij,ij->i", pts, lines[seg, :2]) + lines[seg, 2]
-    return lines, np.split(r, np.cumsum(sizes)[:-1])
+    return np.split(r, np.cumsum(sizes)[:-1])
 
 
 def _refine_vp(point_sets, vp_unit0, image_size, iterations=20):
@@ -1157,15 +1167,10 @@ def _spacing_residual_px(lanes, coord, idx, vp_unit, image_size):
     pred = (a * k + b) / (c * k + d)
     e1, e2 = _pencil_basis(vp_unit)
     ls = np.cos(pred)[:, None] * e1 + np.sin(pred)[:, None] * e2  # predicted lines, scaled frame
-    cen, s = _scale_frame(image_size)
-    lp = np.column_stack([ls[:, 0], ls[:, 1], ls[:, 2] * s - ls[:, 0] * cen[0] - ls[:, 1] * cen[1]])
+    lp = _lines_from_scaled(ls, image_size)
     lp /= np.hypot(lp[:, 0], lp[:, 1])[:, None]
-    sizes = [len(ln.points_px) for ln in lanes]
-    seg = np.repeat(np.arange(len(lanes)), sizes)
-    pts = np.concatenate([ln.points_px for ln in lanes])
-    r2 = (np.einsum("ij,ij->i", pts, lp[seg, :2]) + lp[seg, 2]) ** 2
-    sq = np.bincount(seg, r2, minlength=len(lanes)) / np.maximum(sizes, 1)
-    return float(np.sqrt(np.mean(sq)))
+    res = _line_residuals([ln.points_px for ln in lanes], lp)
+    return float(np.sqrt(np.mean([np.mean(r**2) for r in res])))
 
 
 def undistort_frame_lanes(fl: FrameLanes, dist, focal_px, config=LaneDetectorConfig(), spacing=True):

@@ -393,8 +393,11 @@ def _track_from_contacts(ankles, contacts, fps, config):
             y = meas[i] - kf.H @ kf.x
             S = kf.H @ kf.P @ kf.H.T + kf.R
             nis = float(y @ np.linalg.solve(S, y))
-            if nis > 16.0 and i != keys[0]:
-                loglik += -0.5 * 16.0 - 0.5 * float(np.log(np.linalg.det(2 * np.pi * S)))
+            rejected = nis > 16.0 and i != keys[0]
+            # the innovation's Gaussian log-density (what ``kf.log_likelihood`` gives, without
+            # scipy's per-call overhead), its exponent capped at the gate for a rejected one
+            loglik += -0.5 * (16.0 if rejected else nis) - 0.5 * float(np.log(np.linalg.det(2 * np.pi * S)))
+            if rejected:
                 if run_rejected < config.max_rejected_run:
                     run_rejected += 1
                 else:
@@ -404,9 +407,6 @@ def _track_from_contacts(ankles, contacts, fps, config):
                     run_rejected = 0
             else:
                 kf.update(meas[i])
-                # the innovation's Gaussian log-density (what ``kf.log_likelihood`` gives,
-                # from the same y and S, without scipy's per-call overhead)
-                loglik += -0.5 * nis - 0.5 * float(np.log(np.linalg.det(2 * np.pi * S)))
                 run_rejected = 0
         xs[i], Ps[i] = kf.x, kf.P
     xs, Ps, _, _ = kf.rts_smoother(xs, Ps)
