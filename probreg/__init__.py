@@ -6,9 +6,9 @@ The foundation modules are ``camera``, ``track``, ``skeleton``, ``runner``
 (gait model), ``render`` and ``synth`` (synthetic broadcast clips).
 """
 
-from .camera import Camera
-from .skeleton import ANGLE_NAMES, JOINT_NAMES, joint_angles
-from .track import STANDARD_TRACK, TrackGeometry
+from .geometry import Camera
+from .geometry import ANGLE_NAMES, JOINT_NAMES, joint_angles
+from .geometry import STANDARD_TRACK, TrackGeometry
 
 __version__ = "0.1.0"
 

@@ -20,7 +20,14 @@ class CliError(Exception):
 
 
 def _cmd_synth(args):
-    from .synth import PRESETS, SUITES, config_from_preset, synthesize, write_clip, write_suite
+    from .sim import (
+        PRESETS,
+        SUITES,
+        config_from_preset,
+        synthesize,
+        write_clip,
+        write_suite,
+    )
 
     if args.list:
         print("presets:", ", ".join(sorted(PRESETS)))
@@ -61,9 +68,8 @@ def _cmd_synth(args):
 
 
 def _run_options(args):
+    from .inference import ModelPriors, SamplerSettings
     from .pipeline import RunOptions
-    from .posterior import SamplerSettings
-    from .priors import ModelPriors
 
     priors = ModelPriors.from_options(height=args.height_m, height_sd=args.height_log_sd,
                                       stature=args.stature, stature_sd=args.stature_sd)
@@ -93,7 +99,7 @@ def _cmd_sensitivity(args):
 def _cmd_demo(args):
     from .pipeline import run_clip
     from .report import clip_report
-    from .synth import config_from_preset, synthesize, write_clip
+    from .sim import config_from_preset, synthesize, write_clip
 
     out = Path(args.out)
     out.mkdir(parents=True, exist_ok=True)
@@ -113,9 +119,9 @@ def _parse_dist(text):
 
 
 def _cmd_calibrate(args):
+    from .calibration.registration import DEFAULT_HEIGHT_M, camera_json, register_clip
     from .io.clip import atomic_output_dir, load_clip, write_json
     from .io.frames import has_frames
-    from .registration import DEFAULT_HEIGHT_M, camera_json, register_clip
 
     clip = load_clip(args.clip, min_score=args.min_score)
     if not has_frames(clip):
@@ -255,9 +261,9 @@ def _parse_floats(text, n, name):
 
 def _cmd_detect(args):
     from .detect import detect_sequence, load_pose_model
+    from .geometry import coco_to_h36m
     from .io.clip import load_clip, write_keypoints_json
     from .io.frames import has_frames, iter_frames
-    from .skeleton import coco_to_h36m
 
     clip = load_clip(args.clip)
     if not has_frames(clip):
@@ -277,7 +283,7 @@ def _cmd_detect(args):
 
 
 def _cmd_models(args):
-    from .models import export_yolo
+    from .detect import export_yolo
 
     path = export_yolo(args.out)
     print(f"ONNX model written to {path} (Ultralytics weights, AGPL-3.0)")

@@ -19,14 +19,14 @@ from pathlib import Path
 
 import numpy as np
 
+from .analysis import GAIT_FIELDS
+from .calibration.registration import camera_json, register_clip
+from .geometry import JOINT_NAMES
+from .inference import ModelPriors, angle_bands, gait_intervals
+from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, SamplerSettings
 from .io.clip import ClipFormatError, atomic_output_dir, load_clip, write_json
 from .io.frames import has_frames
 from .io.results import write_angles_csv, write_joints_npz
-from .kinematics import GAIT_FIELDS
-from .posterior import PARAM_NAMES, SEGMENTS, ClipModel, SamplerSettings, angle_bands, gait_intervals
-from .priors import ModelPriors
-from .registration import camera_json, register_clip
-from .skeleton import JOINT_NAMES
 
 __all__ = ["RunOptions", "RunResult", "run_clip", "posterior_inference_data"]
 
@@ -41,7 +41,7 @@ class RunOptions:
     min_score: float = 0.3
     branch: str = "narrow"
     report: bool = True
-    # None: the calibrated bands (probreg.posterior.BAND_SCALE and BAND_CURVATURE_S2); a number
+    # None: the calibrated bands (probreg.inference.BAND_SCALE and BAND_CURVATURE_S2); a number
     # scales the bootstrap band by it, without the curvature term (1.0: raw bootstrap bands)
     band_inflation: float | None = None
 
@@ -77,7 +77,7 @@ def posterior_inference_data(sampler, burn=0, keypoints_px=None, frame_lanes=Non
         idata = idata.sel(draw=slice(burn, None))
     post = idata.posterior
     post["height_m"] = np.exp(post["log_height"])
-    from .priors import SEGMENT_PROPORTIONS
+    from .inference import SEGMENT_PROPORTIONS
 
     for s in SEGMENTS:
         post[f"{s}_m"] = post["stature"] * SEGMENT_PROPORTIONS[s] * post[f"m_{s}"]
@@ -175,7 +175,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
                   gait_intervals(prop["gait_point"], gait, inflation=options.band_inflation).items()}
         joints_med = np.nanmedian(prop["joints_point"], 0)
     cams_med = model.cameras_at(height["median"])
-    from .posterior import _as_list
+    from .geometry.rays import _as_list
 
     cam_list = _as_list(cams_med)
     timings = {"total_s": time.perf_counter() - t0, "lanes_s": t1 - t0, **model.timings}
@@ -198,7 +198,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
         result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
                            gait=gait_s, diagnostics=diag, timings=timings)
         if options.report:
-            from .report import run_report
+            from .report.html import run_report
 
             run_report(tmp / "report.html", clip, result, joints_med, cam_list)
     log(f"height {height['median']:.2f} m [{height['lo']:.2f}, {height['hi']:.2f}]; "

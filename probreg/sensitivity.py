@@ -33,14 +33,13 @@ comparison.
 from __future__ import annotations
 
 import csv
-import json
 import math
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
 
-from .camera import fov_from_focal
+from .geometry import fov_from_focal
 from .io.clip import write_json
 from .lanes import line_straightness_px, undistort_frame_lanes
 from .pipeline import RunOptions, run_clip

@@ -22,7 +22,7 @@ def shared_data():
 @pytest.fixture(scope="session")
 def small_clip(tmp_path_factory):
     """A 40-frame synthetic clip with images, written once per session."""
-    from probreg.synth import config_from_preset, synthesize, write_clip
+    from probreg.sim import config_from_preset, synthesize, write_clip
 
     out = tmp_path_factory.mktemp("clips") / "run"
     clip = synthesize(config_from_preset("distorted", 7, n_frames=40), seed=7, preset="distorted")
@@ -32,7 +32,7 @@ def small_clip(tmp_path_factory):
 
 def _distorted_frame_lanes(cam, n_lines=6, n_pts=200):
     """Sub-pixel support points of lane lines 1..n seen through ``cam`` (with its distortion)."""
-    from probreg.lanes import FrameLanes, LaneLine, _fit_line
+    from probreg.lanes.types import FrameLanes, LaneLine, _fit_line
 
     lines = []
     for k in range(1, n_lines + 1):

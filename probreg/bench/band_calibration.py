@@ -6,7 +6,7 @@ differences towards the neighbouring strides, which re-simulated noise cannot
 show.  The reported band therefore has two parts per side,
 ``sqrt((k d)^2 + (a c)^2)``: the bootstrap deviation ``d`` scaled by ``k``,
 and a smoothing-bias term growing with the curvature ``c`` of the median
-angle curve (``probreg.posterior.angle_bands``).  This benchmark runs clips
+angle curve (``probreg.inference.angle_bands``).  This benchmark runs clips
 whose seeds are outside the benchmark suite with raw bootstrap bands, shows
 for a range of curvature weights ``a`` how evenly the clips are covered (mean
 distance of the per-clip coverage from 90 %) and how wide the band is, and
@@ -22,14 +22,14 @@ from pathlib import Path
 
 import numpy as np
 
+from ..geometry import joint_angles
+from ..inference import BAND_CURVATURE_S2, BAND_SCALE, GAIT_BAND_SCALE, angle_curvature
 from ..io.clip import load_clip, load_groundtruth
 from ..io.results import read_angles_csv
 from ..pipeline import RunOptions, run_clip
-from ..posterior import BAND_CURVATURE_S2, BAND_SCALE, GAIT_BAND_SCALE, angle_curvature
-from .posterior import score_result
-from ..skeleton import joint_angles
-from ..synth import config_from_preset, synthesize, write_clip
+from ..sim import config_from_preset, synthesize, write_clip
 from .common import BenchReport, md_table
+from .posterior import score_result
 
 __all__ = ["run", "HELD_OUT", "fit_scale"]
 

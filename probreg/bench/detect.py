@@ -23,12 +23,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..detect import detect_sequence, load_pose_model
+from ..detect import default_cache_dir, detect_sequence, load_pose_model
+from ..geometry import COCO_NAMES, coco_to_h36m
 from ..io.clip import load_clip, load_groundtruth
 from ..io.frames import iter_frames
-from ..models import default_cache_dir
-from ..skeleton import COCO_NAMES, coco_to_h36m
-from ..synth import config_from_preset, synthesize, write_clip
+from ..sim import config_from_preset, synthesize, write_clip
 from .common import BenchReport, find_shared_data, md_table
 
 __all__ = ["run"]

@@ -26,11 +26,11 @@ from pathlib import Path
 
 import numpy as np
 
+from ..inference import ModelPriors
 from ..io.clip import load_groundtruth
 from ..pipeline import RunOptions, run_clip
-from ..priors import ModelPriors
 from ..sensitivity import distortion_study, lane_straightness_curve, plumb_line_summary
-from ..synth import config_from_preset, synthesize, write_clip
+from ..sim import config_from_preset, synthesize, write_clip
 from .common import BenchReport, md_table
 from .posterior import score_result
 

@@ -16,13 +16,12 @@ import warnings
 
 import numpy as np
 
-from ..baselines import generic_camera_lift, planar_knee_angles
+from ..calibration import register_clip
+from ..geometry import JOINT_INDEX, camera_arrays, joint_angles
 from ..io.clip import load_clip, load_groundtruth
-from ..lifting import LiftConfig, camera_arrays, lift
-from ..registration import register_clip
-from ..skeleton import JOINT_INDEX, joint_angles
-from ..synth import SUITES
-from ..trajectory import fit_ground_track
+from ..lifting import LiftConfig, fit_ground_track, lift
+from ..sim import SUITES
+from .baselines import generic_camera_lift, planar_knee_angles
 from .common import BenchReport, md_table
 from .registration import suite_dir
 

@@ -29,12 +29,12 @@ from pathlib import Path
 
 import numpy as np
 
+from ..geometry import JOINT_INDEX, joint_angles
+from ..inference import ModelPriors
 from ..io.clip import load_groundtruth, read_cameras_json
 from ..io.results import read_angles_csv
 from ..pipeline import RunOptions, run_clip
-from ..priors import ModelPriors
-from ..skeleton import JOINT_INDEX, joint_angles
-from ..synth import SUITES
+from ..sim import SUITES
 from .common import BenchReport, md_table
 from .registration import suite_dir
 
@@ -43,11 +43,11 @@ __all__ = ["run", "score_result", "true_gait"]
 
 def true_gait(clip_dir):
     """Gait numbers of the ground truth (true contacts, pelvis speed and knee angles), with
-    the definitions of :func:`probreg.kinematics.gait_summary`."""
+    the definitions of :func:`probreg.analysis.kinematics.gait_summary`."""
     from types import SimpleNamespace
 
+    from ..analysis import gait_summary
     from ..io.clip import load_clip
-    from ..kinematics import gait_summary
 
     gt = load_groundtruth(clip_dir)
     fps = load_clip(clip_dir).fps
@@ -182,7 +182,7 @@ def run(args=None):
             rep.add(f"### {variant}: targets\n")
             rep.add(md_table(["quantity", "target", "measured", "met"],
                              [[a, b, c, "yes" if d else "**no**"] for a, b, c, d in checks]))
-            from ..kinematics import GAIT_FIELDS
+            from ..analysis import GAIT_FIELDS
 
             grows = []
             for name, unit in GAIT_FIELDS.items():

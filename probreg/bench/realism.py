@@ -14,9 +14,9 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..kinematics import cycle_curves
-from ..runner import STYLES, Anthropometry, gait_for_style, simulate_runner
-from ..skeleton import joint_angles
+from ..analysis import cycle_curves
+from ..geometry import joint_angles
+from ..sim import STYLES, Anthropometry, gait_for_style, simulate_runner
 from .common import BenchReport, find_shared_data, md_table
 
 __all__ = ["run", "mocap_knee_cycles", "synthetic_knee_cycles", "stride_repeat_sd", "stance_ankle_motion"]
@@ -51,9 +51,9 @@ def stance_ankle_motion(joints_m, contacts, fps, window=None):
     the end of that window above its lowest point in the contact.  Returns a dict of
     arrays (one entry per contact).
     """
-    from ..kinematics import _runs
-    from ..posterior import STANCE_WINDOW, stance_window
-    from ..skeleton import JOINT_INDEX
+    from ..geometry import JOINT_INDEX
+    from ..inference import STANCE_WINDOW, stance_window
+    from ..lifting.trajectory import _runs
 
     window = STANCE_WINDOW if window is None else window
     X = np.asarray(joints_m, float)
@@ -184,7 +184,7 @@ def run(args=None):
     cat = {k: (np.concatenate([p[k] for p in pooled_real]), np.concatenate([p[k] for p in pooled_syn]))
            for k in ("early_travel_cm", "slide", "rise_cm")}
     rows.append(["all contacts", len(cat["slide"][0]), *(np.median(v) for k in cat for v in cat[k])])
-    from ..posterior import STANCE_WINDOW, STILLNESS_SYS_SD
+    from ..inference import STANCE_WINDOW, STILLNESS_SYS_SD
 
     p0, p1 = STANCE_WINDOW
     rep.add(f"## (d) The stance ankle (medians per contact; window {100 * p0:.0f}-{100 * p1:.0f} % of stance)\n")

@@ -24,12 +24,11 @@ from pathlib import Path
 import cv2
 import numpy as np
 
-from ..calibration import CalibrationError, CalibrationFamily
+from ..calibration import CalibrationError, CalibrationFamily, register_clip
+from ..geometry import lane_line_y
 from ..io.clip import load_clip, load_groundtruth
 from ..lanes import detect_lanes, draw_lanes, track_lanes
-from ..registration import register_clip
-from ..synth import SUITES, write_suite
-from ..track import lane_line_y
+from ..sim import SUITES, write_suite
 from .common import BenchReport, find_shared_data, md_table
 
 __all__ = ["run", "suite_dir", "frame_metrics"]

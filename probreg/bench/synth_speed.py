@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..synth import config_from_preset, synthesize, write_clip
+from ..sim import config_from_preset, synthesize, write_clip
 from .common import BenchReport, md_table
 
 __all__ = ["run"]

@@ -17,8 +17,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..camera import Camera
-from ..skeleton import JOINT_NAMES, coco_to_h36m
+from ..geometry import JOINT_NAMES, Camera, coco_to_h36m
 
 __all__ = [
     "ClipFormatError",

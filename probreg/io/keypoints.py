@@ -23,7 +23,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..skeleton import COCO_NAMES, JOINT_NAMES, coco_to_h36m
+from ..geometry import COCO_NAMES, JOINT_NAMES, coco_to_h36m
 from .clip import ClipFormatError
 
 __all__ = ["read_keypoints", "read_coco_results", "read_openpose_folder", "read_keypoint_csv",

@@ -7,7 +7,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..skeleton import ANGLE_NAMES, JOINT_NAMES
+from ..geometry import ANGLE_NAMES, JOINT_NAMES
 from .clip import ClipFormatError
 
 __all__ = ["write_angles_csv", "read_angles_csv", "write_joints_npz"]

@@ -1,0 +1,20 @@
+"""Cleaning of a clip's 2D keypoints before lifting: noise estimates, outlier and gap handling,
+and cross-stride smoothing that uses the repetition of running strides
+(:func:`clean_keypoints` chooses the method from the clip's noise).
+"""
+
+from .basic import butterworth, fill_gaps, hampel, keypoint_noise_px, noise_model
+from .clean import clean_keypoints
+from .periodic import (
+    periodic_smooth,
+    periodic_smooth_series,
+    score_noise_scale,
+    stride_lags,
+    stride_period_frames,
+)
+
+__all__ = [
+    "hampel", "fill_gaps", "butterworth", "clean_keypoints", "keypoint_noise_px", "noise_model",
+    "periodic_smooth", "periodic_smooth_series", "score_noise_scale", "stride_lags",
+    "stride_period_frames",
+]

@@ -1,0 +1,71 @@
+"""The cleaning chain of a clip's 2D keypoints: cross-stride smoothing for noisy clips with
+repeating strides, Hampel + gap filling + Butterworth otherwise, clean keypoints left alone."""
+
+from __future__ import annotations
+
+import numpy as np
+
+from .basic import (
+    butterworth,
+    fill_gaps,
+    hampel,
+    noise_model,
+)
+from .periodic import periodic_smooth
+
+__all__ = ["clean_keypoints"]
+
+
+def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=3.0, max_gap=10,
+                    noise_floor_px=1.5):
+    """Hampel outlier rejection, short-gap filling and zero-phase low-pass of every coordinate.
+
+    Parameters
+    ----------
+    keypoints_px : ndarray, shape (F, J, 3)
+        ``(x, y, score)``; NaN = missing.
+    fps : float
+    cutoff_hz : float, "auto" or None
+        Low-pass cut-off (None: no low-pass; "auto": when the estimated detection
+        noise exceeds ``noise_floor_px``, cross-stride smoothing
+        (:func:`periodic_smooth`) or, for clips without repeating strides, a 7 Hz
+        Butterworth low-pass; otherwise none: a low-pass also flattens the true
+        knee-flexion peaks, so clean keypoints are better left alone).
+
+    Returns
+    -------
+    ndarray, shape (F, J, 3)
+        Cleaned coordinates; filled joints get score 0.5 (still usable), unfillable stay NaN.
+    """
+    kp = np.asarray(keypoints_px, float)
+    noise = noise_model(kp)[0] if kp.shape[1] == 17 else np.inf
+    noisy = not np.isfinite(noise) or noise > noise_floor_px
+    periodic = cutoff_hz == "auto" and noisy
+    if cutoff_hz == "auto":
+        cutoff_hz = 7.0 if noisy else None
+    # outlier scale: a clean track's own curvature at turning points must not look like an outlier
+    scale = max(1.0, 2.0 * noise) if np.isfinite(noise) else 1.0
+    out = kp.copy()
+    for j in range(kp.shape[1]):
+        cols = []
+        for c in range(2):
+            x = hampel(kp[:, j, c], half_window, n_sigma, min_scale=scale) if noisy else kp[:, j, c]
+            cols.append(x)
+        # an outlier in x or y removes the joint
+        bad = ~np.isfinite(cols[0]) | ~np.isfinite(cols[1])
+        for c in range(2):
+            x = fill_gaps(np.where(bad, np.nan, cols[c]), max_gap)
+            out[:, j, c] = butterworth(x, fps, cutoff_hz) if cutoff_hz else x
+        filled = np.isfinite(out[:, j, 0]) & ~np.isfinite(kp[:, j, 2])
+        out[filled, j, 2] = 0.5
+        out[~np.isfinite(out[:, j, 0]), j] = np.nan
+    if periodic:
+        # raw detections: the smoother rejects outliers itself and fills short gaps
+        sm = periodic_smooth(kp, fps, fill_max_gap=max_gap)
+        if sm is not None:  # else: clip without repeating strides, keep the low-pass
+            done = np.all(np.isfinite(kp[..., :2]), -1).sum(0) >= len(kp) // 2  # joints it took
+            use = done[None, :] & np.all(np.isfinite(sm[..., :2]), -1)
+            out[..., :2] = np.where(use[..., None], sm[..., :2], out[..., :2])
+            out[use & ~np.isfinite(kp[..., 2]), 2] = 0.5
+            out[done[None, :] & ~use] = np.nan
+    return out

@@ -1,0 +1,31 @@
+"""The probabilistic layer: priors on camera height, stature and limb proportions
+(:class:`ModelPriors`), the clip model whose posterior over the one-DOF calibration and limb
+lengths ``emcee`` samples (:class:`ClipModel`), propagation of every kept draw through the
+lifting, and credible bands for angles and gait numbers (:func:`angle_bands`).
+"""
+
+from .bands import (
+    BAND_CURVATURE_S2,
+    BAND_SCALE,
+    GAIT_BAND_SCALE,
+    NONNEGATIVE_GAIT_SUFFIXES,
+    STANCE_WINDOW,
+    angle_bands,
+    angle_curvature,
+    gait_intervals,
+    stance_window,
+)
+from .model import (
+    PARAM_NAMES,
+    STILLNESS_SYS_SD,
+    ClipModel,
+    SamplerSettings,
+)
+from .priors import SEGMENT_PROPORTIONS, LogNormalPrior, ModelPriors, NormalPrior, Prior
+
+__all__ = [
+    "Prior", "NormalPrior", "LogNormalPrior", "ModelPriors", "SEGMENT_PROPORTIONS", "angle_bands",
+    "STANCE_WINDOW", "stance_window", "BAND_SCALE", "angle_curvature", "gait_intervals",
+    "GAIT_BAND_SCALE", "NONNEGATIVE_GAIT_SUFFIXES", "ClipModel", "SamplerSettings", "PARAM_NAMES",
+    "STILLNESS_SYS_SD", "BAND_CURVATURE_S2",
+]

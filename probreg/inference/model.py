@@ -1,0 +1,578 @@
+"""The Bayesian clip model: posterior over the one-DOF calibration and the limb lengths.
+
+Parameters (one clip, one static camera):
+
+``log_height``
+    log of the camera height (m): selects the family member in every frame.
+``stature``
+    the athlete's stature (m).
+``m_<segment>``
+    multipliers of the anthropometric segment proportions (thigh, shank,
+    upper arm, forearm, trunk, hip width, shoulder width); segment length =
+    stature x proportion x multiplier.
+
+Likelihood (every term a function of the height; the limb terms also of the lengths):
+
+* static camera: the family members at one height must share one camera
+  position; the spread of their lateral positions over the clip (lane-line
+  evidence that survives the per-frame one-DOF freedom) is scored with a
+  Student-t;
+* the ground-contact trajectory: the Kalman filter's marginal
+  log-likelihood of the contact points (a runner's path is smooth; a wrong
+  height stretches and bends it);
+* planted feet: a foot in mid-stance (:data:`STANCE_WINDOW` of its contact)
+  stands still on the track, but family members at a wrong height disagree
+  on where a ground point is from frame to frame (the position along the
+  track is free in each frame, and a panning camera sees it shift
+  differently at every height), so planted ankles seem to slide.  The
+  median slide over the clip's contacts, as a fraction of the running speed,
+  is scored with a Gaussian whose sd adds :data:`STILLNESS_SYS_SD` (the slide
+  left at the true height: contact timing, keypoint noise, real ankle
+  motion) to the median's standard error;
+* keypoints: the limb lengths measured in the sagittal plane at this height
+  (the quantity the ray-sphere misses of the lifting depend on: a limb whose
+  sphere is smaller than its keypoints' in-plane distance is missed) against
+  the parameter lengths, with the measurement's standard error.
+
+The height-dependent statistics are precomputed on a grid of heights and
+interpolated, so the log-probability is vectorised over walkers and costs
+microseconds; ``emcee`` runs until the chain is 50 integrated
+autocorrelation times long (or a budget is spent).  Every kept draw is then
+*propagated*: cameras at its height, ground track, lifting with its limb
+lengths and with detector noise re-simulated (parametric bootstrap of the
+keypoints), giving joint and angle samples and so credible bands.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..calibration.registration import (
+    ClipRegistration,
+    _zoom_outliers,
+    athlete_ground_track,
+    glitch_vote,
+    lane_anchor_shift,
+)
+from ..filtering import clean_keypoints, noise_model, stride_lags
+from ..geometry import JOINT_INDEX
+from ..geometry.rays import CameraArrays, _as_list
+from ..lifting import LiftConfig
+from ..lifting.trajectory import _runs, fit_ground_track
+from .bands import stance_window
+from .priors import SEGMENT_PROPORTIONS, ModelPriors
+from .propagation import DrawPropagation, _default_workers, _fork_map
+
+__all__ = ["ClipModel", "SamplerSettings", "PARAM_NAMES", "STILLNESS_SYS_SD"]
+
+
+#: Systematic sd of the planted-foot slide (fraction of the running speed) at the true
+#: camera height.  One per cent of height moves the slide by ~0.025, so alone the term
+#: places the height to ~3 %, independent of the stature prior.  Chosen with
+#: :data:`STANCE_WINDOW` on the 14 suite clips and the 8 held-out clips of ``bench
+#: band-calibration`` (seeds 901-908) together: a grid approximation of the posterior gave
+#: a height error of 3.3 % and 20 of 22 height intervals holding the truth, against 4.1 %
+#: and 19 of 22 with 0.12 and the first half of stance (the previous choice); 0.06
+#: narrows further but starts losing coverage.
+STILLNESS_SYS_SD = 0.08
+
+
+SEGMENTS = ("thigh", "shank", "upper_arm", "forearm", "trunk", "hip_width", "shoulder_width")
+
+OBSERVED_SEGMENTS = ("thigh", "shank", "upper_arm", "forearm", "trunk")
+
+PARAM_NAMES = ["log_height", "stature"] + [f"m_{s}" for s in SEGMENTS]
+
+@dataclass(frozen=True)
+class SamplerSettings:
+    """Sampling budget and propagation size."""
+
+    n_walkers: int = 24
+    tau_multiple: float = 50.0
+    max_steps: int = 8000
+    chunk: int = 250
+    burn_in: int = 200
+    n_draws: int = 60
+    bootstrap_noise: bool = True
+    seed: int = 0
+
+
+class ClipModel(DrawPropagation):
+    """Posterior of one clip: built from a registration and the (raw) keypoints.
+
+    Parameters
+    ----------
+    registration : ClipRegistration
+    keypoints_px : ndarray (F, 17, 3)
+        Raw H36M keypoints (NaN = missing).
+    fps : float
+    athlete_lane : int or None
+    priors : ModelPriors
+    dist : array_like (5,), optional
+        Known lens distortion.
+    n_grid : int
+        Heights on which the height-dependent statistics are precomputed.
+    track_weight : float
+        Weight of the ground-track filter's (per-contact) log-likelihood.  Its
+        absolute values depend on unmodelled effects (foot placement, detector
+        noise in depth), so it enters damped; 1 uses it at face value.
+
+    Raises
+    ------
+    ValueError
+        If no frame has lanes, or no height of the prior's range gives cameras.
+    """
+
+    def __init__(self, registration: ClipRegistration, keypoints_px, fps, athlete_lane=None,
+                 priors: ModelPriors = ModelPriors(), dist=None, n_grid=36, branch="narrow",
+                 track_weight=0.2):
+        t0 = time.perf_counter()
+        self.reg = registration
+        self.fps = float(fps)
+        self.priors = priors
+        self.dist = None if dist is None else np.asarray(dist, float)
+        self.athlete_lane = athlete_lane
+        self.raw = np.asarray(keypoints_px, float)
+        self.kp = clean_keypoints(self.raw, self.fps)
+        self.noise_sd, self.noise_rho = noise_model(self.raw)
+        self.F = len(self.kp)
+        # stride timing for the cross-stride angle smoothing of every lifting (None: no
+        # repeating strides, or keypoints too clean to need it -- as in lift()'s "auto")
+        noisy = not np.isfinite(self.noise_sd) or self.noise_sd > LiftConfig().noise_floor_px
+        self.stride_lag = stride_lags(self.kp, self.fps) if noisy else None
+        self.branch = branch
+        self.track_weight = float(track_weight)
+        self.max_gap_frames = 25
+        self._build_branches()
+        if not self.valid.any():
+            raise ValueError("no frame has a usable calibration family (no lanes found)")
+        lo, hi = self.height_range
+        plo, phi = priors.camera_height.interval(0.998)
+        g_lo, g_hi = max(lo, plo), min(hi, phi)
+        if not g_hi > g_lo:
+            raise ValueError(f"the prior's camera heights ({plo:.1f}-{phi:.1f} m) do not overlap the "
+                             f"heights the lanes allow ({lo:.1f}-{hi:.1f} m)")
+        self.h_ref = float(np.clip(priors.camera_height.centre(), g_lo, g_hi))
+        self._fix_offsets()
+        self.grid = np.geomspace(g_lo, g_hi, n_grid)
+        # two passes: contacts and lane offsets detected at a wrong height are wrong (a 50 %
+        # error distorts the cast feet), so the first pass finds a reference height from
+        # the limb lengths and the static camera alone, the second scores every term there
+        self._precompute()
+        theta = np.column_stack([np.log(self.grid), np.full(n_grid, priors.stature.centre()),
+                                 np.ones((n_grid, len(SEGMENTS)))])
+        saved = self.track_weight
+        self.track_weight = 0.0
+        lp = self.log_prob(theta)
+        self.track_weight = saved
+        if np.isfinite(lp).any():
+            self.h_ref = float(self.grid[int(np.nanargmax(np.where(np.isfinite(lp), lp, -np.inf)))])
+        self._fix_offsets(final=True)
+        self._precompute()
+        self.timings = {"precompute_s": time.perf_counter() - t0}
+
+    # ------------------------------------------------------------------ cameras as a function of h
+    def _build_branches(self, n=500):
+        """Per frame: the family on a dense focal grid, restricted to one branch, as arrays."""
+        fams = self.reg.sequence.families
+        self.valid = np.array([f is not None for f in fams])
+        self.inconsistent = np.zeros(self.F, bool)  # lanes found, family off the zoom path
+        w = self.reg.image_size[0]
+        self.logf = np.full((self.F, n), np.nan)
+        self.h = np.full((self.F, n), np.nan)
+        self.y = np.full((self.F, n), np.nan)
+        self.R = np.full((self.F, n, 3, 3), np.nan)
+        self.pp = np.tile([(self.reg.image_size[0] - 1) / 2, (self.reg.image_size[1] - 1) / 2], (self.F, 1))
+        self.flip = np.zeros(self.F, bool)
+        lo, hi = np.inf, -np.inf
+        from ..geometry import focal_from_fov
+
+        fgrid = np.geomspace(focal_from_fov(150.0, w), focal_from_fov(0.3, w), n)
+        frames = [i for i, fam in enumerate(fams) if fam is not None]
+        if self.dist is not None and np.any(self.dist):
+            # every member undistorts the frame's lines anew (~1 ms each): frames go to the cores
+            k = max(1, min(_default_workers(), len(frames)))
+            parts = _fork_map(lambda idx: {i: self._members(i, fams[i], fgrid) for i in idx},
+                              [frames[j::k] for j in range(k)])
+            members = {i: m for part in parts for i, m in part.items()}
+        else:
+            members = {i: self._members(i, fams[i], fgrid) for i in frames}
+        for i in frames:
+            fam = fams[i]
+            m = members[i]
+            ok = m["valid"] & np.isfinite(m["height_m"])
+            if ok.sum() < 3:
+                self.valid[i] = False
+                continue
+            hh = np.where(ok, m["height_m"], np.nan)
+            k = int(np.nanargmax(hh))
+            sl = slice(k, n) if self.branch == "narrow" else slice(0, k + 1)
+            self.logf[i, sl] = np.log(fgrid[sl])
+            self.h[i, sl] = hh[sl]
+            self.y[i, sl] = m["y_m"][sl]
+            self.R[i, sl] = m["R"][sl]
+            self.pp[i] = fam.principal_point
+            self.flip[i] = bool(np.median(m["index_flipped"][ok]))
+            seg = hh[sl]
+            lo, hi = min(lo, np.nanmin(seg)), max(hi, np.nanmax(seg))
+        self.height_range = (lo, hi)
+        self.valid_lanes = self.valid.copy()
+        self._glitches = None
+
+    def _members(self, i, fam, fgrid):
+        """Members of frame ``i``'s family at the focal lengths ``fgrid`` (lines undistorted
+        with each member's own focal length when the lens distortion is given)."""
+        if self.dist is None or not np.any(self.dist):
+            return fam.members(fgrid)
+        from ..calibration import undistorted_members
+
+        lo, hi = self.priors.camera_height.interval(0.998)
+        return undistorted_members(self.reg.frame_lanes[i], fam, fgrid, self.dist, self.reg.forward_px,
+                                   self.reg.lane_width_m, height_window=(lo / 1.5, hi * 1.5),
+                                   branch=self.branch)
+
+    def _member_at(self, i, height_m):
+        """Grid members of frame ``i``'s branch that bracket ``height_m``: ``(ia, ib, t)`` to
+        interpolate linearly (``t`` from ``ia`` to ``ib``), or None when out of its reach."""
+        hh = self.h[i]
+        ok = np.isfinite(hh)
+        if ok.sum() < 2:
+            return None
+        hv = hh[ok]
+        order = np.argsort(hv)
+        hs = hv[order]
+        if not hs[0] <= height_m <= hs[-1]:
+            return None
+        j = int(np.clip(np.searchsorted(hs, height_m), 1, len(hs) - 1))
+        a, b = order[j - 1], order[j]
+        t = (height_m - hv[a]) / (hv[b] - hv[a]) if hv[b] != hv[a] else 0.0
+        idx = np.flatnonzero(ok)
+        return idx[a], idx[b], t
+
+    def _focal_at(self, height_m):
+        """(F,) focal length of every frame's own member at ``height_m`` (NaN: none)."""
+        out = np.full(self.F, np.nan)
+        for i in np.flatnonzero(self.valid_lanes):
+            at = self._member_at(i, height_m)
+            if at is not None:
+                ia, ib, t = at
+                out[i] = np.exp(self.logf[i, ia] + t * (self.logf[i, ib] - self.logf[i, ia]))
+        return out
+
+    def cameras_at(self, height_m, offsets=None):
+        """Per-frame cameras of the family member at ``height_m`` as CameraArrays."""
+        F = self.F
+        valid = self.valid.copy()
+        f = np.full(F, np.nan)
+        y = np.full(F, np.nan)
+        R = np.full((F, 3, 3), np.nan)
+        for i in np.flatnonzero(self.valid):
+            at = self._member_at(i, height_m)
+            if at is None:
+                valid[i] = False
+                continue
+            ia, ib, t = at
+            f[i] = np.exp(self.logf[i, ia] + t * (self.logf[i, ib] - self.logf[i, ia]))
+            y[i] = self.y[i, ia] + t * (self.y[i, ib] - self.y[i, ia])
+            Rm = self.R[i, ia] + t * (self.R[i, ib] - self.R[i, ia])
+            u, _, vt = np.linalg.svd(Rm)
+            R[i] = u @ vt  # nearest rotation
+        off = self.offsets if offsets is None else offsets
+        y = y - self.reg.lane_width_m * off
+        # frames without lanes between frames with lanes: the camera moves smoothly, so
+        # bridge them (zoom, lateral position and rotation interpolated in time)
+        self.gap_distance = np.zeros(F)
+        ok = np.flatnonzero(valid)
+        if len(ok) >= 2:
+            for i in range(ok[0] + 1, ok[-1]):
+                if valid[i]:
+                    continue
+                a, b = ok[ok < i][-1], ok[ok > i][0]
+                if b - a > self.max_gap_frames:
+                    continue
+                t = (i - a) / (b - a)
+                f[i] = np.exp((1 - t) * np.log(f[a]) + t * np.log(f[b]))
+                y[i] = (1 - t) * y[a] + t * y[b]
+                u, _, vt = np.linalg.svd((1 - t) * R[a] + t * R[b])
+                R[i] = u @ vt
+                valid[i] = True
+                self.gap_distance[i] = min(i - a, b - i)
+        C = np.column_stack([np.zeros(F), y, np.full(F, height_m)])
+        C[~valid] = np.nan
+        return CameraArrays(valid=valid, C=C, R=R, focal_px=f, principal_px=self.pp,
+                            dist=np.zeros(5) if self.dist is None else self.dist)
+
+    def _fix_offsets(self, final=False):
+        """Lane-index offsets (frame to frame and to the athlete's lane) at the reference height."""
+        reg = self.reg
+        seq = reg.sequence
+        seq.branch = self.branch
+        # frames with a wrong family (a spurious or misplaced line) are bridged from their
+        # neighbours like frames without lanes: those off the clip's zoom path at every height
+        # and, once the reference height is settled (``final``), those off it at that height
+        # (removing them at a first guess far from the truth would make that guess look
+        # consistent)
+        self.valid = self.valid_lanes.copy()
+        self.inconsistent[:] = False
+        # judged on the model's own families (with a lens, those of the undistorted lines)
+        if self._glitches is None:
+            self._glitches = glitch_vote(self._focal_at, self.valid_lanes)
+        odd = set(self._glitches)
+        if final:
+            odd |= set(_zoom_outliers(self._focal_at(self.h_ref)))
+        odd = sorted(i for i in odd if self.valid[i])
+        if odd and len(odd) < self.valid.sum() - 2:
+            self.valid[odd] = False
+            self.inconsistent[odd] = True
+        self.offsets = np.asarray(reg.track_offsets(seq, self.h_ref), int)
+        cams = self.cameras_at(self.h_ref, offsets=self.offsets)
+        self.offsets = self.offsets + lane_anchor_shift(athlete_ground_track(_as_list(cams), self.kp),
+                                                        self.athlete_lane, reg.lane_width_m)
+
+    # ------------------------------------------------------------------ likelihood on a grid
+    def _precompute(self):
+        G = len(self.grid)
+        self.ll_track = np.full(G, -np.inf)
+        self.ll_static = np.full(G, -np.inf)
+        self.seg_obs = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
+        self.seg_se = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
+        # contacts are detected once (reference height) so every hypothesis is scored on the
+        # same measurements; the filter's noise scales with the hypothesis (scale ~ height)
+        ref = fit_ground_track(self.cameras_at(self.h_ref), self.kp, self.fps)
+        self.contacts = ref.contacts
+        self.stance_windows = self._stance_windows()
+        slides = np.full((G, len(self.stance_windows)), np.nan)
+        n_frames = max(int(self.valid.sum()), 1)
+        for g, h in enumerate(self.grid):
+            cams = self.cameras_at(h)
+            if cams.valid.sum() < 3:
+                continue
+            tr = fit_ground_track(cams, self.kp, self.fps, contacts=self.contacts,
+                                  config=self._track_config(cams))
+            # tempered to one contact's worth: the filter's innovations are not independent
+            # (the same feet, seen through one camera path), and its value under wrong
+            # heights is dominated by unmodelled effects; undamped it would swamp every
+            # other term by hundreds of nats
+            n_meas = max(len(tr.contact_points_m), 1)
+            self.ll_track[g] = tr.log_likelihood / n_meas if np.isfinite(tr.log_likelihood) else -1e3
+            # static camera: one lateral position for all frames.  Residuals relative to the
+            # camera-athlete distance (scale-free), Student-t (nu = 4) with scale 0.3 %,
+            # tempered for the correlation of neighbouring frames (~10 frames)
+            ys = cams.C[cams.valid, 1]
+            dist = np.abs(np.median(ys) - np.nanmedian(tr.position_m[:, 1]))
+            resid = (ys - np.median(ys)) / max(dist, 1.0)
+            # a frame with lanes whose family has no member at this height (h beyond the
+            # frame's branch) counts like a frame 10 % off the common position: otherwise a
+            # height reached by a few odd frames only would be scored on those frames alone
+            no_member = self.valid & ~(cams.valid & (self.gap_distance == 0))
+            per_frame = -2.5 * np.log1p((resid / 0.003) ** 2 / 4)
+            off_frame = -2.5 * np.log1p((0.1 / 0.003) ** 2 / 4)
+            self.ll_static[g] = float(np.sum(per_frame) + off_frame * no_member.sum()) * (
+                min(1.0, 25.0 / n_frames) if n_frames > 25 else 1.0) * 2.5
+            self._segment_stats(g, cams, tr)
+            slides[g] = self._slides(cams, tr)
+        self._score_slides(slides)
+
+    def _stance_windows(self):
+        """``(side, first, n)``: the foot-flat part of every whole contact
+        (fractions :data:`STANCE_WINDOW` of the detected contact)."""
+        return [(side, *stance_window(a, b)) for side in (0, 1) for a, b in _runs(self.contacts[:, side])
+                if a > 0 and b < self.F and b - a >= 3]  # a contact cut by the clip has no known phase
+
+    def _slides(self, cams, tr):
+        """Along-track velocity of each planted ankle (mid-stance, windows
+        ``self.stance_windows``) as a fraction of the running speed, for the cameras ``cams``:
+        (K,), NaN where unmeasured.
+
+        The ankle is cast onto the athlete's vertical plane
+        (:func:`probreg.lifting.trajectory.sagittal_ankle_points`), where its along-track position
+        does not move when the ankle rises (on the ground plane it would)."""
+        from ..lifting import sagittal_ankle_points
+
+        win = self.stance_windows
+        out = np.full(len(win), np.nan)
+        if not win or tr.status != "ok":
+            return out
+        x = sagittal_ankle_points(cams, self.kp, tr)[..., 0]
+        with np.errstate(invalid="ignore"):
+            v_run = float(np.nanmedian(tr.velocity_mps[:, 0]))
+        if not np.isfinite(v_run) or abs(v_run) < 0.5:
+            return out
+        for k, (side, a, n) in enumerate(win):
+            xs = x[a:a + n, side]
+            ok = np.isfinite(xs)
+            if ok.sum() >= 2:
+                out[k] = np.polyfit(np.flatnonzero(ok).astype(float), xs[ok], 1)[0] * self.fps / v_run
+        return out
+
+    def _score_slides(self, slides):
+        """``ll_still`` on the grid from the per-contact slides (G, K)."""
+        self.ll_still = np.zeros(len(self.grid))
+        self.slide_median = np.full(len(self.grid), np.nan)
+        rows = np.isfinite(slides).any(axis=1)  # heights with cameras and a track
+        K = slides.shape[1]
+        n_ok = np.isfinite(slides).sum(axis=1)
+        if K < 4 or not rows.any():
+            return  # too few whole contacts: no evidence
+        import warnings
+
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            # a height that sees fewer than half the contacts is not scored on the few it sees
+            med = np.where(n_ok >= max(4, K / 2), np.nanmedian(slides, axis=1), np.nan)
+            # the median's scatter, measured once (at the reference height) for every hypothesis
+            g0 = int(np.argmin(np.abs(np.log(self.grid / self.h_ref))))
+            mad = 1.4826 * np.nanmedian(np.abs(slides[g0] - np.nanmedian(slides[g0])))
+        if not np.isfinite(mad):
+            return
+        sd = float(np.hypot(1.2533 * mad / np.sqrt(max(n_ok[g0], 1)), STILLNESS_SYS_SD))
+        self.slide_median = med
+        # a height where the slide cannot be measured counts as a slide of the running speed
+        self.ll_still = np.where(np.isfinite(med), -0.5 * (med / sd) ** 2, -0.5 * (1.0 / sd) ** 2)
+
+    def _track_config(self, cams):
+        """Contact-point noise for this hypothesis: foot placement plus the keypoint noise cast
+        onto the ground (across the track it is magnified by the camera's grazing view)."""
+        from ..lifting import TrackConfig
+
+        ok = cams.valid
+        if not ok.any() or not np.isfinite(self.noise_sd):
+            return TrackConfig()
+        pel = self.kp[:, JOINT_INDEX["pelvis"], :2]
+        from ..geometry import pixel_rays
+
+        rays = pixel_rays(cams, pel[:, None, :])[:, 0]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            t = -cams.C[:, 2] / rays[:, 2]
+            depth = np.nanmedian(t)
+            sin_tilt = np.nanmedian(np.abs(rays[:, 2]))
+            f = np.nanmedian(cams.focal_px)
+        along = self.noise_sd * depth / f
+        across = along / max(sin_tilt, 0.02)
+        base = TrackConfig()
+        return TrackConfig(contact_std_m=(float(np.hypot(base.contact_std_m[0], along)),
+                                          float(np.hypot(base.contact_std_m[1], across))))
+
+    def _segment_stats(self, g, cams, tr):
+        from ..geometry import SEGMENT_BONES, pixel_rays
+        from ..lifting.raycast import _plane_hits
+
+        J = JOINT_INDEX
+        point = np.column_stack([tr.position_m, np.zeros(self.F)])
+        P = _plane_hits(cams.C, pixel_rays(cams, self.kp[..., :2]), point, tr.left)
+        depth = np.linalg.norm(P[:, J["pelvis"]] - cams.C, axis=-1)
+        sd_m = np.nanmedian(self.noise_sd * depth / cams.focal_px) if np.isfinite(self.noise_sd) else 0.0
+        for s in OBSERVED_SEGMENTS:
+            lens = np.concatenate([np.linalg.norm(P[:, J[b]] - P[:, J[a]], axis=-1) for a, b in SEGMENT_BONES[s]])
+            lens = lens[np.isfinite(lens)]
+            if len(lens) < 10:
+                continue
+            obs = float(np.percentile(lens, 60))
+            # remove the length that keypoint noise adds to a distance (2 joints, 2-D)
+            obs = float(np.sqrt(max(obs**2 - 2 * sd_m**2, (0.5 * obs) ** 2)))
+            mad = 1.4826 * np.median(np.abs(lens - np.median(lens)))
+            n_eff = max(len(lens) / 10.0, 1.0)  # frames are strongly correlated
+            self.seg_obs[s][g] = obs
+            self.seg_se[s][g] = float(np.hypot(mad / np.sqrt(n_eff), 0.02 * obs))
+
+    def _interp(self, arr, log_h):
+        return np.interp(log_h, np.log(self.grid), arr, left=np.nan, right=np.nan)
+
+    # ------------------------------------------------------------------ the log-probability
+    def lengths(self, theta):
+        """Segment lengths (m) of parameter vectors (W, D): dict seg -> (W,)."""
+        theta = np.atleast_2d(theta)
+        st = theta[:, 1]
+        return {s: st * SEGMENT_PROPORTIONS[s] * theta[:, 2 + k] for k, s in enumerate(SEGMENTS)}
+
+    def log_prior(self, theta):
+        theta = np.atleast_2d(theta)
+        h = np.exp(theta[:, 0])
+        lp = self.priors.camera_height.logpdf(h) + theta[:, 0]  # Jacobian of h = exp(log h)
+        lp = lp + self.priors.stature.logpdf(theta[:, 1])
+        sd = self.priors.proportion_sd
+        lp = lp + np.sum(-0.5 * ((theta[:, 2:] - 1.0) / sd) ** 2, axis=1)
+        lp = np.where((theta[:, 1] > 0.5) & np.all(theta[:, 2:] > 0.5, axis=1), lp, -np.inf)
+        return lp
+
+    def log_likelihood(self, theta):
+        theta = np.atleast_2d(theta)
+        lh = theta[:, 0]
+        with np.errstate(invalid="ignore"):
+            ll = (self.track_weight * self._interp(self.ll_track, lh) + self._interp(self.ll_static, lh)
+                  + self._interp(self.ll_still, lh))
+        L = self.lengths(theta)
+        for s in OBSERVED_SEGMENTS:
+            if not np.isfinite(self.seg_obs[s]).any():
+                continue  # never seen in this clip: the prior alone speaks
+            obs = self._interp(self.seg_obs[s], lh)
+            se = self._interp(self.seg_se[s], lh)
+            # a height at which a seen segment cannot be measured is not a free pass
+            ll = ll - 0.5 * ((obs - L[s]) / se) ** 2 - np.log(se)
+        return np.where(np.isfinite(ll), ll, -np.inf)
+
+    def log_prob(self, theta):
+        """Vectorised log-posterior: theta (W, D) -> (W,)."""
+        lp = self.log_prior(theta)
+        out = np.full(len(lp), -np.inf)
+        ok = np.isfinite(lp)
+        if ok.any():
+            out[ok] = lp[ok] + self.log_likelihood(np.atleast_2d(theta)[ok])
+        return np.where(np.isfinite(out), out, -np.inf)
+
+    # ------------------------------------------------------------------ sampling
+    def initial_walkers(self, n, rng):
+        """Walkers around the best grid height with lengths at their observed values."""
+        theta_grid = []
+        for g, h in enumerate(self.grid):
+            st = self.priors.stature.centre()
+            th = np.r_[np.log(h), st, np.ones(len(SEGMENTS))]
+            theta_grid.append(th)
+        lp = self.log_prob(np.array(theta_grid))
+        g = int(np.nanargmax(np.where(np.isfinite(lp), lp, -np.inf)))
+        base = theta_grid[g]
+        # stature from the observed thigh + shank at that height, if available
+        obs = np.nanmean([self.seg_obs[s][g] / SEGMENT_PROPORTIONS[s] for s in ("thigh", "shank")])
+        if np.isfinite(obs):
+            base[1] = obs
+        step = np.log(self.grid[1] / self.grid[0]) if len(self.grid) > 1 else 0.05
+        scale = np.r_[step, 0.02, np.full(len(SEGMENTS), 0.02)]
+        p0 = base + rng.normal(0, 1, (n, len(base))) * scale
+        # every walker must start where the posterior is positive
+        for _ in range(50):
+            bad = ~np.isfinite(self.log_prob(p0))
+            if not bad.any():
+                break
+            p0[bad] = base + rng.normal(0, 1, (bad.sum(), len(base))) * scale * 0.5
+        return p0
+
+    def sample(self, settings: SamplerSettings = SamplerSettings(), progress=None):
+        """Run emcee; returns (chain after burn-in, log-probs, acceptance, tau, diagnostics)."""
+        import emcee
+
+        rng = np.random.default_rng(settings.seed)
+        D = len(PARAM_NAMES)
+        if settings.n_walkers < 2 * D:
+            raise ValueError(f"emcee's stretch move needs at least {2 * D} walkers for {D} parameters, "
+                             f"got {settings.n_walkers}")
+        p0 = self.initial_walkers(settings.n_walkers, rng)
+        sampler = emcee.EnsembleSampler(settings.n_walkers, D, self.log_prob, vectorize=True)
+        sampler.random_state = np.random.RandomState(settings.seed).get_state()  # reproducible moves
+        t0 = time.perf_counter()
+        state = sampler.run_mcmc(p0, settings.burn_in, progress=False, skip_initial_state_check=True)
+        sampler.reset()
+        tau = np.full(D, np.inf)
+        steps = 0
+        while steps < settings.max_steps:
+            state = sampler.run_mcmc(state, settings.chunk, progress=False, skip_initial_state_check=True)
+            steps += settings.chunk
+            tau = sampler.get_autocorr_time(tol=0)
+            if np.all(np.isfinite(tau)) and steps >= settings.tau_multiple * np.max(tau):
+                break
+        self.timings["sampling_s"] = time.perf_counter() - t0
+        self.sampler = sampler
+        return sampler, tau
+

@@ -1,0 +1,194 @@
+"""Propagation of posterior draws to joints and angles (re-lifting every kept draw)."""
+
+from __future__ import annotations
+
+import time
+
+import numpy as np
+
+from ..analysis import gait_summary
+from ..filtering import clean_keypoints, score_noise_scale
+from ..geometry import ANGLE_NAMES, JOINT_INDEX, CameraArrays
+from ..lifting import LiftConfig, fit_ground_track, lift
+
+__all__ = ["DrawPropagation"]
+
+
+class DrawPropagation:
+    """The propagation half of :class:`probreg.inference.ClipModel`: every kept draw is lifted
+    again (cameras at its height, its limb lengths, re-simulated detector noise).
+
+    Needs the clip model's ``cameras_at``, ``lengths``, keypoints (``kp``, ``raw``), noise model
+    (``noise_sd``, ``noise_rho``), ``contacts``, ``stride_lag``, ``gap_distance`` and ``timings``."""
+
+    def propagate(self, draws, rng, bootstrap_noise=True, config: LiftConfig = LiftConfig(), workers=None):
+        """Lift the clip for every draw.
+
+        Each draw is lifted twice: from the cleaned keypoints (the draw's *point*
+        lifting: calibration and limb-length uncertainty) and from the cleaned
+        keypoints plus re-simulated detector noise, cleaned again exactly as the
+        data were (parametric bootstrap: adds the detector noise).  Both liftings
+        smooth the hip, knee and elbow angles across strides as :func:`lift` does for
+        noisy clips (with the clip's stride timing, found once).
+
+        Every draw has its own random stream (spawned from ``rng``), so the result
+        does not depend on ``workers``: draws are shared out over that many forked
+        processes (default: the machine's cores, at most 4; 1, or a platform without
+        ``fork``, runs them here).
+
+        Returns
+        -------
+        dict
+            ``joints`` (S, F, 17, 3) and ``angles`` {name: (S, F)} with noise;
+            ``joints_point``, ``angles_point`` without; ``gait_point`` {name: (S,)} from
+            the point liftings, ``gait`` from the noisy ones (contacts detected anew).
+        """
+        t0 = time.perf_counter()
+        S = len(draws)
+        cross = config.cross_stride_angles
+        cross = self.stride_lag is not None if cross == "auto" else bool(cross)
+        cfg = LiftConfig(**{**config.__dict__, "smooth_cutoff_hz": None, "cross_stride_angles": cross})
+        L = self.lengths(draws)
+        seeds = rng.integers(0, 2**63 - 1, size=S)
+        with_noise = bootstrap_noise and np.isfinite(self.noise_sd) and self.noise_sd > 0
+        job = (draws, L, seeds, cfg, with_noise, self._joint_noise_scale() if with_noise else None)
+        workers = max(1, min(_default_workers() if workers is None else int(workers), S))
+        chunks = [list(range(S))[k::workers] for k in range(workers)]
+        parts = _fork_map(lambda idx: self._propagate_draws(idx, *job), chunks)
+        out = {"joints": np.full((S, self.F, 17, 3), np.nan, np.float32),
+               "joints_point": np.full((S, self.F, 17, 3), np.nan, np.float32),
+               "angles": {k: np.full((S, self.F), np.nan) for k in ANGLE_NAMES},
+               "angles_point": {k: np.full((S, self.F), np.nan) for k in ANGLE_NAMES},
+               "gait": {}, "gait_point": {}}
+        for part in parts:
+            for s, res in part.items():
+                for key in ("joints", "joints_point"):
+                    out[key][s] = res[key]
+                for key in ("angles", "angles_point"):
+                    for k in ANGLE_NAMES:
+                        out[key][k][s] = res[key][k]
+                for key in ("gait", "gait_point"):
+                    for k, v in res[key].items():
+                        out[key].setdefault(k, np.full(S, np.nan))[s] = v
+        self.timings["propagation_s"] = time.perf_counter() - t0
+        return out
+
+    def _propagate_draws(self, indices, draws, L, seeds, cfg, with_noise, per_joint):
+        """The liftings of some draws: {draw index: {joints, joints_point, angles, angles_point, gait}}."""
+        out = {}
+        for s in indices:
+            rng = np.random.default_rng(int(seeds[s]))
+            h = float(np.exp(draws[s, 0]))
+            cams = self._jitter_bridged(self.cameras_at(h), rng)
+            seg = {k: float(v[s]) for k, v in L.items()}
+            variants = [("_point", self.kp)]
+            if with_noise:
+                noisy = self.kp.copy()
+                noisy[..., :2] += (_ar1_noise(rng, self.kp.shape[:2] + (2,), self.noise_sd, self.noise_rho)
+                                   * per_joint[..., None])
+                variants.append(("", clean_keypoints(noisy, self.fps)))
+            res_s = {}
+            for suffix, kp in variants:
+                # the same contacts for every draw (detected once on the cleaned keypoints)
+                tr = fit_ground_track(cams, kp, self.fps, contacts=self.contacts)
+                res = lift(cams, kp, self.fps, segments_m=seg, track=tr, config=cfg, stride_lag=self.stride_lag)
+                a = res.angles_deg()
+                res_s["joints" + suffix] = res.joints_track_m.astype(np.float32)
+                res_s["angles" + suffix] = a
+                if suffix == "_point":
+                    res_s["gait_point"] = dict(gait_summary(res.track, a, self.fps))
+                else:
+                    # the timing of the steps comes from the contacts: in the bootstrap they are
+                    # detected anew on the re-noised keypoints, so cadence and contact times vary
+                    res_s["gait"] = dict(gait_summary(fit_ground_track(cams, kp, self.fps), a, self.fps))
+            if not with_noise:
+                res_s["joints"], res_s["angles"] = res_s["joints_point"], res_s["angles_point"]
+                res_s["gait"] = res_s["gait_point"]
+            out[s] = res_s
+        return out
+
+    def _jitter_bridged(self, cams, rng, deg_per_frame=0.01, zoom_per_frame=0.002):
+        """Uncertainty of bridged frames (no lanes): random pan/tilt and zoom growing with the
+        distance to the nearest frame with lanes, so their bands widen where evidence is missing."""
+        d = self.gap_distance
+        if not np.any(d > 0):
+            return cams
+        R = cams.R.copy()
+        f = cams.focal_px.copy()
+        for i in np.flatnonzero(d > 0):
+            a = np.radians(deg_per_frame * d[i]) * rng.standard_normal(2)
+            ca, sa, cb, sb = np.cos(a[0]), np.sin(a[0]), np.cos(a[1]), np.sin(a[1])
+            pan = np.array([[ca, 0, -sa], [0, 1, 0], [sa, 0, ca]])
+            tilt = np.array([[1, 0, 0], [0, cb, -sb], [0, sb, cb]])
+            R[i] = tilt @ pan @ R[i]
+            f[i] *= np.exp(zoom_per_frame * d[i] * rng.standard_normal())
+        return CameraArrays(valid=cams.valid, C=cams.C, R=R, focal_px=f, principal_px=cams.principal_px,
+                            dist=cams.dist)
+
+    def _joint_noise_scale(self):
+        """Relative noise sd of every detection (F, 17) for the bootstrap (trunk = 1).
+
+        Each joint's level comes from its residuals after cleaning; within a joint,
+        detections are scaled by what their confidence says about their error
+        (:func:`probreg.filtering.score_noise_scale`, normalised to unit RMS per
+        joint), so the re-simulated noise relates to the scores as the data's does
+        and the cleaning of the bootstrap copies weights them as it weighted the data."""
+        resid = self.raw[..., :2] - self.kp[..., :2]
+        rms = np.sqrt(np.nanmean(resid**2, axis=(0, 2)))
+        trunk = np.nanmean(rms[[JOINT_INDEX["pelvis"], JOINT_INDEX["spine"], JOINT_INDEX["thorax"]]])
+        scale = rms / trunk if np.isfinite(trunk) and trunk > 0 else np.ones(17)
+        scale = np.where(np.isfinite(scale), np.clip(scale, 0.5, 3.0), 1.0)
+        out = np.tile(scale, (self.F, 1))
+        rel = score_noise_scale(self.raw, self.kp, self.noise_sd)
+        if rel is not None:
+            with np.errstate(invalid="ignore"):
+                unit = rel / np.sqrt(np.nanmean(rel**2, axis=0))[None]
+            out = out * np.where(np.isfinite(unit), unit, 1.0)
+        return out
+
+
+#: the function forked workers run on their chunk (set only while a pool runs)
+_FORKED = None
+
+def _default_workers():
+    import os
+
+    return min(os.cpu_count() or 1, 4)
+
+
+def _forked_chunk(indices):
+    from threadpoolctl import threadpool_limits
+
+    # the workers already use every core: BLAS threads inside them only compete (4x slower)
+    with threadpool_limits(limits=1):
+        return _FORKED(indices)
+
+
+def _fork_map(func, chunks):
+    """``[func(chunk) for chunk in chunks]``, on one forked process per chunk when there are
+    several and the platform forks (the workers inherit ``func`` and its data; only the
+    chunks and the results are pickled), else here, as also when processes are not allowed."""
+    import multiprocessing as mp
+
+    global _FORKED
+    if len(chunks) > 1 and "fork" in mp.get_all_start_methods():
+        _FORKED = func
+        try:
+            with mp.get_context("fork").Pool(len(chunks)) as pool:
+                return pool.map(_forked_chunk, chunks)
+        except OSError:  # no processes allowed here (sandbox, limits)
+            pass
+        finally:
+            _FORKED = None
+    return [func(c) for c in chunks]
+
+
+def _ar1_noise(rng, shape, sd, rho):
+    """AR(1) noise along axis 0 with marginal sd ``sd``."""
+    e = rng.standard_normal(shape)
+    out = np.empty(shape)
+    out[0] = e[0]
+    c = np.sqrt(1 - rho**2)
+    for t in range(1, shape[0]):
+        out[t] = rho * out[t - 1] + c * e[t]
+    return out * sd

@@ -1,0 +1,270 @@
+"""Lane detection in one frame: rough lines, the shared vanishing point, the ordered pencil.
+
+An exhaustive pair search finds the vanishing point that most long lines share (robust to
+the athlete, kerbs and stray marks); pieces of one bent line are joined, and a missing line
+in the middle is found from the projective spacing fit when at least four lines are seen.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+
+from ..geometry import cross3
+from .measure import (
+    _measure_lines,
+    _median,
+    _merge_segments,
+    _robust_fit,
+    _sagitta,
+    _segments,
+)
+from .types import (
+    FrameLanes,
+    LaneDetectorConfig,
+    LaneLine,
+    _fit_line,
+    _from_unit,
+    _to_unit,
+)
+from .undistort import _undistort_px
+from .vanishing import (
+    _pencil_coordinate,
+    _refine_vp,
+    _spacing_residual_px,
+    assign_line_indices,
+    lines_through_point,
+)
+
+__all__ = ["detect_lanes"]
+
+
+# --------------------------------------------------------------------------- main entry
+def detect_lanes(image_bgr, config: LaneDetectorConfig = LaneDetectorConfig(), frame=None,
+                 dist=None, focal_px=None, exclude=None):
+    """Detect the lane lines of the straight and their vanishing point in one frame.
+
+    Parameters
+    ----------
+    image_bgr : ndarray, shape (H, W, 3), uint8, or None
+    config : LaneDetectorConfig
+    frame : int, optional
+        Frame index stored in the result.
+    dist : array_like (5,), optional
+        Known or hypothesised lens distortion; with ``focal_px`` the support points are
+        undistorted before the lines and the vanishing point are fitted.
+    focal_px : float, optional
+    exclude : ndarray (S, 5), optional
+        Image regions whose line evidence is ignored, as capsules (:func:`athlete_mask`).
+
+    Returns
+    -------
+    FrameLanes
+        Never raises for bad image content; see :data:`STATUSES`.
+    """
+    if image_bgr is None or not hasattr(image_bgr, "shape") or image_bgr.ndim != 3 or image_bgr.size == 0:
+        return FrameLanes(status="bad_image", frame=frame)
+    h, w = image_bgr.shape[:2]
+    size = (w, h)
+    segs, n_mask = _segments(image_bgr, config)
+    if len(segs) == 0:
+        return FrameLanes(status="no_lines", image_size=size, frame=frame, extra={"mask_px": n_mask})
+    candidates, (n_curved, curved_len) = _measure_candidates(image_bgr, _merge_segments(segs, config), config,
+                                                         exclude=exclude)
+    # merge candidates that turned out to be the same line after re-measurement
+    candidates = _dedupe(candidates, config)
+    fl = FrameLanes(status="no_lines", image_size=size, frame=frame, n_curved=n_curved,
+                    extra={"curved_length_px": curved_len})
+    if len(candidates) < 2:
+        return replace(fl, status="no_straight" if n_curved >= 2 else
+                       ("too_few_lines" if candidates or n_curved else "no_lines"))
+    if dist is not None and focal_px is not None and np.any(dist):
+        candidates = [(_fit_line(p), p, L) for _, p, L in
+                      ((c[0], _undistort_px(c[1], dist, focal_px, size), c[2]) for c in candidates)]
+        fl = replace(fl, undistorted=True)
+    return _pencil_from_candidates(candidates, fl, config)
+
+
+def _measure_candidates(image_bgr, endpoint_sets, config, distinct=False, exclude=None):
+    """Sub-pixel measurement of rough lines (longest first); curved ones are counted, not kept.
+
+    All lines are measured in one batch.  With ``distinct=False`` a cluster lying on an
+    already measured line is dropped as a duplicate; ``distinct=True`` (lines known to be
+    different, e.g. followed from the previous frame) keeps every one.  Returns the
+    candidates ``(line, points, length)`` and ``(number, total length)`` of curved ones.
+    """
+    candidates, measured = [], []
+    n_curved, curved_length = 0, 0.0
+    order = sorted(endpoint_sets, key=lambda e: -np.ptp(e, axis=0).max())
+    # all profiles in one batch (one remap); duplicates are rare and dropped afterwards
+    batch = _measure_lines(image_bgr, order, config, exclude)
+    for k, ep in enumerate(order):
+        # a cluster lying on an already measured line is a duplicate
+        if not distinct and any(np.max(np.abs(ep @ m[:2] + m[2])) < 3.0 for m in measured):
+            continue
+        pts = batch[k]
+        if pts is None or len(pts) < 6:
+            continue
+        line, keep = _robust_fit(pts)
+        pts = pts[keep]
+        if len(pts) < 6:
+            continue
+        length = np.ptp(pts @ np.array([-line[1], line[0]]))
+        sag, quad_rms = _sagitta(pts, line, with_residual=True)
+        # a bend's arc curves far more than lens distortion bends a lane line
+        # (curvature ~ 8 sagitta / length^2: bends >= 4e-5 / px, distorted straight lines <= 2e-5)
+        if sag > config.curved_sagitta_px and 8 * sag / length**2 > config.curved_curvature_per_px:
+            if quad_rms < 0.35 and length > 150:  # a clean arc is bend evidence; clutter is not
+                n_curved += 1
+                curved_length += length
+            continue
+        candidates.append((line, pts, length))
+        measured.append(line)
+    return candidates, (n_curved, curved_length)
+
+
+def _image_chord(line, image_size):
+    """The two points where a line leaves the image rectangle, shape (2, 2) (None if outside)."""
+    w, h = image_size
+    a, b, c = line
+    pts = []
+    if abs(b) > 1e-12:
+        for x in (0.0, w - 1.0):
+            y = -(a * x + c) / b
+            if 0 <= y <= h - 1:
+                pts.append((x, y))
+    if abs(a) > 1e-12:
+        for y in (0.0, h - 1.0):
+            x = -(b * y + c) / a
+            if 0 <= x <= w - 1:
+                pts.append((x, y))
+    if len(pts) < 2:
+        return None
+    pts = np.array(pts)
+    d = np.array([-b, a])
+    t = pts @ d
+    return pts[[np.argmin(t), np.argmax(t)]]
+
+
+def _dedupe(cands, cfg):
+    out = []
+    cos_tol = np.cos(np.radians(cfg.merge_angle_deg))
+    reach = 2.0 + np.sin(np.radians(cfg.merge_angle_deg)) * 4000.0  # bound for a near-parallel duplicate
+    for line, pts, L in sorted(cands, key=lambda c: -c[2]):
+        mid = pts[len(pts) // 2]
+        for k, (l2, p2, L2) in enumerate(out):
+            if abs(line[:2] @ l2[:2]) > cos_tol and abs(mid @ l2[:2] + l2[2]) < reach and \
+                    _median(np.abs(pts @ l2[:2] + l2[2])) < 2.0:
+                allp = np.concatenate([p2, pts])
+                out[k] = (_fit_line(allp), allp, L2 + L)
+                break
+        else:
+            out.append((line, pts, L))
+    return out
+
+
+def _pencil_from_candidates(cands, fl, cfg):
+    size = fl.image_size
+    mids = np.array([p.mean(0) for _, p, _ in cands])
+    lines = np.array([c[0] for c in cands])
+    lengths = np.array([L for _, _, L in cands])
+    n = len(cands)
+    ii, jj = np.triu_indices(n, 1)
+    vps = cross3(lines[ii], lines[jj])  # (P, 3) candidate vanishing points
+    # angle between every line and the direction from its midpoint to every candidate
+    dirs = np.stack([-lines[:, 1], lines[:, 0]], -1)  # (n, 2)
+    to_vp = vps[:, None, :2] - mids[None] * vps[:, None, 2:3]  # (P, n, 2)
+    nrm = np.linalg.norm(to_vp, axis=-1)
+    cosang = np.abs(np.sum(to_vp * dirs[None], -1)) / np.maximum(nrm, 1e-300)
+    inlier = (cosang > np.cos(np.radians(cfg.vp_inlier_deg))) | (nrm < 1e-9)
+    count = inlier.sum(1)
+    score = count * 1e9 + inlier @ lengths  # most lines first, then the longest support
+    if len(score) == 0:
+        return replace(fl, status="too_few_lines")
+    p = int(np.argmax(score))
+    best = (vps[p], list(np.flatnonzero(inlier[p])))
+    if len(best[1]) < cfg.min_lines:
+        status = "no_straight" if fl.n_curved >= 2 and len(best[1]) < 2 else "too_few_lines"
+        return replace(fl, status=status)
+    vp, inl = best
+    if fl.extra.get("curved_length_px", 0.0) > lengths[inl].sum():
+        # more curved line evidence than straight: a bend, whose short chords can mimic a pencil
+        return replace(fl, status="no_straight")
+    sets = [cands[k][1] for k in inl]
+    v_unit, cov, sigma = _refine_vp(sets, _to_unit(vp, size), size)
+    lines_px, res = lines_through_point(sets, v_unit, size)
+    coord = _pencil_coordinate(lines_px, v_unit, size)
+    joined = _join_pieces(sets, lines_px, coord)
+    if len(joined) < len(sets):
+        sets = joined
+        if len(sets) < cfg.min_lines:
+            return replace(fl, status="too_few_lines")
+        v_unit, cov, sigma = _refine_vp(sets, v_unit, size)
+        lines_px, res = lines_through_point(sets, v_unit, size)
+        coord = _pencil_coordinate(lines_px, v_unit, size)
+    order = np.argsort(coord)
+    # canonical direction (the sign of the homogeneous vanishing point is arbitrary, so the
+    # angular order may run either way): the first line is the one nearer the image top
+    # (or, for near-vertical lines, the left edge) where it passes the image centre
+    c0 = np.array([(size[0] - 1) / 2, (size[1] - 1) / 2, 1.0])
+    nrm = lines_px[:, :2].mean(0)
+    nrm = nrm * (1 if (abs(nrm[1]) >= abs(nrm[0]) and nrm[1] > 0) or
+                 (abs(nrm[1]) < abs(nrm[0]) and nrm[0] > 0) else -1)
+    offs = -(lines_px @ c0) * np.sign(lines_px[:, :2] @ nrm)  # signed position along nrm
+    if offs[order[-1]] < offs[order[0]]:
+        order = order[::-1]
+    idx, spacing = assign_line_indices(coord[order], cfg.max_missing_lines)
+    lanes = tuple(LaneLine(line=lines_px[o], points_px=sets[o], rms_px=float(np.sqrt(np.mean(res[o] ** 2))),
+                           index=int(k)) for o, k in zip(order, idx))
+    spacing_px = (_spacing_residual_px(lanes, coord[order], idx, v_unit, size) if len(lanes) >= 4
+                  else float("nan"))
+    return replace(fl, status="ok", lines=lanes, vanishing_point=_from_unit(v_unit, size), vp_cov=cov,
+                   spacing_residual_px=spacing_px, extra={"vp_unit": v_unit, "vp_sigma_px": sigma})
+
+
+def _join_pieces(sets, lines_px, coord, max_frac=0.2, max_overlap=0.5):
+    """Support-point sets of the pencil with the pieces of one lane line joined.
+
+    A lane line bent by a distorting lens (or partly hidden) can reach the pencil as
+    two straight pieces, one after the other along the line.  Their pencil
+    coordinates nearly coincide (within ``max_frac`` of the typical spacing of
+    neighbouring lines) while distinct lane lines are a whole spacing apart; a kerb
+    or a second line close beside a lane line runs alongside it instead, so pieces
+    whose extents along the line overlap by more than ``max_overlap`` of the shorter
+    one are not joined.
+
+    >>> pts = lambda y0, x0, x1: np.column_stack([np.arange(x0, x1, 10.0), y0 + 0.1 * np.arange(x0, x1, 10.0)])
+    >>> sets = [pts(100, 0, 1000), pts(200, 0, 500), pts(200.4, 500, 1000), pts(300, 0, 1000)]
+    >>> lines = np.array([[-0.1, 1, -y] for y in (100, 200, 200.4, 300)]) / np.hypot(0.1, 1)
+    >>> [len(p) for p in _join_pieces(sets, lines, np.array([0.0, 1.0, 1.004, 2.0]))]
+    [100, 100, 100]
+    """
+    n = len(sets)
+    if n < 3:
+        return sets
+    order = np.argsort(coord)
+    gaps = np.diff(np.asarray(coord, float)[order])
+    big = gaps[gaps > 0.25 * np.median(gaps)]
+    if not len(big):
+        return sets
+    tol = max_frac * float(np.median(big))
+    groups = [[order[0]]]
+    for k, g in zip(order[1:], gaps):
+        if g < tol and all(_overlap(sets[k], sets[j], lines_px[j]) <= max_overlap for j in groups[-1]):
+            groups[-1].append(k)
+        else:
+            groups.append([k])
+    if len(groups) == n:
+        return sets
+    return [np.concatenate([sets[j] for j in grp]) if len(grp) > 1 else sets[grp[0]] for grp in groups]
+
+
+def _overlap(pts_a, pts_b, line):
+    """Overlap of two point sets' extents along ``line``, as a fraction of the shorter extent."""
+    d = np.array([-line[1], line[0]])
+    ta, tb = pts_a @ d, pts_b @ d
+    inter = min(ta.max(), tb.max()) - max(ta.min(), tb.min())
+    shorter = max(min(np.ptp(ta), np.ptp(tb)), 1e-9)
+    return max(inter, 0.0) / shorter
+

@@ -1,0 +1,251 @@
+"""Finding and measuring lane lines in one image.
+
+A white-line response (morphological top-hat of the per-pixel minimum over B, G, R: white is
+bright in every channel, the red track and the green infield are not) at reduced resolution,
+``cv2.HoughLinesP`` segments, merging of collinear segments, and sub-pixel re-measurement of
+every rough line at full resolution (background-subtracted luma centroids of short
+perpendicular pixel runs), with a robust straight fit and its sagitta (bends are rejected).
+"""
+
+from __future__ import annotations
+
+import functools
+
+import cv2
+import numpy as np
+
+from .mask import _near_capsules
+from .types import _fit_line, _line_from_moments, _moments
+
+__all__ = []
+
+
+_TRIPLE_KERNEL = np.ones((1, 3), np.uint8)
+
+def _white_response(gray_min, tophat_px):
+    k = cv2.getStructuringElement(cv2.MORPH_RECT, (tophat_px, tophat_px))
+    return cv2.morphologyEx(gray_min, cv2.MORPH_TOPHAT, k)
+
+
+@functools.lru_cache(maxsize=8)
+def _vote_selection(shape, fraction):
+    """A fixed pseudo-random 0/255 mask selecting ``fraction`` of the pixels (same every call)."""
+    rng = np.random.default_rng(20231)
+    return np.where(rng.random(shape) < fraction, 255, 0).astype(np.uint8)
+
+
+def _segments(img_bgr, cfg):
+    h, w = img_bgr.shape[:2]
+    scale = min(1.0, cfg.work_width_px / w)
+    small = cv2.resize(img_bgr, (int(round(w * scale)), int(round(h * scale))),
+                       interpolation=cv2.INTER_AREA) if scale < 1 else img_bgr
+    # minimum of B, G, R per pixel: an erosion across each interleaved (B, G, R) triple,
+    # read at the G positions (one pass, no channel split)
+    gmin = np.ascontiguousarray(
+        cv2.erode(small.reshape(small.shape[0], -1), _TRIPLE_KERNEL, borderType=cv2.BORDER_REPLICATE)[:, 1::3])
+    resp = _white_response(gmin, cfg.tophat_px)
+    _, mask = cv2.threshold(resp, cfg.threshold, 255, cv2.THRESH_BINARY)
+    # thin wide lines to their ridge (local maximum across rows or across columns): the
+    # Hough transform's cost grows with the number of points, its result does not improve
+    r = resp
+    ridge = np.zeros(r.shape, bool)
+    ridge[1:-1, :] = (r[1:-1] >= r[:-2]) & (r[1:-1] > r[2:])
+    ridge[:, 1:-1] |= (r[:, 1:-1] >= r[:, :-2]) & (r[:, 1:-1] > r[:, 2:])
+    mask = cv2.bitwise_and(mask, mask, mask=ridge.view(np.uint8))
+    n_mask = int(np.count_nonzero(mask))
+    frac = float(np.clip(cfg.hough_point_fraction, 0.0, 1.0))
+    threshold = cfg.hough_threshold
+    if frac < 1.0:
+        mask = cv2.bitwise_and(mask, _vote_selection(mask.shape, frac))
+        threshold = max(2, int(round(threshold * frac)))
+    segs = cv2.HoughLinesP(mask, 1, np.radians(cfg.hough_theta_deg), threshold,
+                           minLineLength=cfg.min_length_frac * small.shape[1], maxLineGap=cfg.max_gap_px)
+    if segs is None:
+        return np.zeros((0, 4)), n_mask
+    segs = segs.reshape(-1, 4).astype(float) / scale
+    if len(segs) > cfg.max_segments:
+        keep = np.argsort(-np.hypot(segs[:, 2] - segs[:, 0], segs[:, 3] - segs[:, 1]))[:cfg.max_segments]
+        segs = segs[keep]
+    return segs, n_mask
+
+
+def _merge_segments(segs, cfg):
+    """Greedy clustering of collinear segments; returns a list of endpoint arrays."""
+    if len(segs) == 0:
+        return []
+    lengths = np.hypot(segs[:, 2] - segs[:, 0], segs[:, 3] - segs[:, 1])
+    order = np.argsort(-lengths)
+    clusters = []  # [line, endpoint arrays, moments]
+    cos_tol = np.cos(np.radians(cfg.merge_angle_deg))
+    for i in order:
+        p = segs[i].reshape(2, 2)
+        d = (p[1] - p[0]) / max(lengths[i], 1e-9)
+        mom = _moments(p)
+        placed = False
+        for c in clusters:
+            line = c[0]
+            if abs(d[0] * line[1] - d[1] * line[0]) < cos_tol:  # |d . line direction|
+                continue
+            if max(abs(p[0] @ line[:2] + line[2]), abs(p[1] @ line[:2] + line[2])) < cfg.merge_dist_px:
+                c[1].append(p)
+                c[2] = c[2] + mom
+                c[0] = _line_from_moments(*c[2])
+                placed = True
+                break
+        if not placed:
+            clusters.append([_line_from_moments(*mom), [p], mom])
+    return [np.concatenate(c[1]) for c in clusters]
+
+
+#: BGR weights of the luma (Rec. 601) in which lines are measured: JPEG and broadcast codecs keep
+#: luma at full resolution, while the colour channels are subsampled and shifted (the minimum of
+#: B, G, R, which finds white lines best, moves a measured centre by ~0.01 px after JPEG)
+_LUMA_BGR = np.array([0.114, 0.587, 0.299], np.float32)
+
+def _measure_lines(image_bgr, endpoint_sets, cfg, exclude=None):
+    """Sub-pixel centre points along rough lines: luma centroids across the line on the pixel grid.
+
+    Every ``profile_step_px`` along a rough line, the pixels of one image column (a line
+    closer to horizontal) or row (closer to vertical) within ``profile_half_px`` of it
+    are read without interpolation, and their background-subtracted centroid is the line
+    centre there.  The discrete centroid of a blurred line is free of the sub-pixel
+    "pixel locking" that interpolated, resampled profiles show (the ~0.5 px-periodic bias
+    of a centroid over bilinear samples does not average out along lines whose slope
+    barely changes, e.g. a camera square-on to the straight, and it tilts them); the
+    centre of a straight band's cross-section in a column lies on its centre line, so the
+    points need no correction.  Profiles that reach into the capsules ``exclude``
+    (:func:`athlete_mask`) are dropped.  Returns one (N_i, 2) array (or None when too
+    little is seen) per line.
+    """
+    h, w = image_bgr.shape[:2]
+    # per line: reading direction, profile half-width and the columns (rows) it crosses;
+    # lines alike in both are measured in one batch (one gather, one centroid pass)
+    pixels = image_bgr.reshape(-1, 3)  # flat indexing: a 1-D gather is faster than a 2-D one
+    plans, groups = [], {}
+    for k, endpoints in enumerate(endpoint_sets):
+        endpoints = np.asarray(endpoints, float)
+        a, b, c = _fit_line(endpoints)
+        horizontal = bool(abs(b) >= abs(a))  # normal mostly vertical: read columns
+        ax, nrm = (0, b) if horizontal else (1, a)
+        lo, hi = endpoints[:, ax].min(), endpoints[:, ax].max()
+        major = np.arange(np.ceil(lo), hi, cfg.profile_step_px)
+        if len(major) == 0:
+            plans.append(None)
+            continue
+        # the predicted crossing of each column (row), and the pixels around it
+        pred = -((a * major if horizontal else b * major) + c) / nrm
+        half = int(np.ceil(cfg.profile_half_px / abs(nrm)))
+        plans.append((major, np.round(pred).astype(np.int64)))
+        groups.setdefault((horizontal, half), []).append(k)
+    points, ok_all = [None] * len(plans), [None] * len(plans)
+    for (horizontal, half), members in groups.items():
+        major = np.concatenate([plans[k][0] for k in members])
+        base = np.concatenate([plans[k][1] for k in members])
+        offs = np.arange(-half, half + 1)
+        minor = base[:, None] + offs[None, :]
+        major_i = np.broadcast_to(major.astype(np.int64)[:, None], minor.shape)
+        X, Y = (major_i, minor) if horizontal else (minor, major_i)
+        inside = (X.min(1) >= 0) & (Y.min(1) >= 0) & (X.max(1) <= w - 1) & (Y.max(1) <= h - 1)
+        flat_idx = (np.clip(Y, 0, h - 1) * w + np.clip(X, 0, w - 1)).ravel()
+        prof = np.take(pixels, flat_idx, axis=0).reshape(minor.shape + (3,)) @ _LUMA_BGR
+        off, ok = _profile_centroids(prof, offs.astype(float), cfg.threshold * 0.6)
+        ok &= inside
+        ax = 0 if horizontal else 1
+        pts = np.empty((len(major), 2))
+        pts[:, ax] = major
+        pts[:, 1 - ax] = base + off
+        if exclude is not None:
+            ok &= ~_near_capsules(pts, exclude, cfg.profile_half_px)
+        splits = np.cumsum([len(plans[k][0]) for k in members])[:-1]
+        for k, p_k, ok_k in zip(members, np.split(pts, splits), np.split(ok, splits)):
+            points[k], ok_all[k] = p_k, ok_k
+    return [None if plan is None or ok_all[k].sum() < 4 else points[k][ok_all[k]]
+            for k, plan in enumerate(plans)]
+
+
+def _profile_centroids(prof, offs, min_contrast):
+    """Background-subtracted centroids of bright lines in profiles (N, M) sampled at ``offs``.
+
+    The background is taken per side of the peak (the two sides may differ: infield and
+    track), from the outer two samples.  The centroid runs over the contiguous stretch
+    around the peak above 15 % of its contrast (a neighbouring line must not pull it),
+    widened by one sample on each side and kept unclipped there, so that cutting the
+    blurred flanks at a threshold does not lock the centre to the pixel grid.
+
+    Returns the offsets (N,) and whether each profile saw a line (contrast above
+    ``min_contrast``, widened stretch inside the profile).
+
+    >>> prof = np.array([[10, 10, 10, 60, 110, 60, 10, 10.0]])
+    >>> off, ok = _profile_centroids(prof, np.arange(8.0) - 4, 20)
+    >>> float(off[0]), bool(ok[0])
+    (0.0, True)
+    """
+    n_side = 2
+    cols = np.arange(prof.shape[1])[None, :]
+    am = np.argmax(prof, axis=1)[:, None]
+    left_bg = prof[:, :n_side].mean(1)[:, None]
+    right_bg = prof[:, -n_side:].mean(1)[:, None]
+    base = np.where(cols < am, left_bg, right_bg)
+    top = prof.max(axis=1)[:, None]
+    peak = (top - np.minimum(left_bg, right_bg))[:, 0]
+    # weights ~ line coverage on both sides: normalise by the contrast on each side
+    wts = (prof - base) / np.maximum(top - base, 1e-6) * peak[:, None]
+    low = wts <= 0.15 * peak[:, None]
+    left = np.where(low & (cols < am), cols, -1).max(1) - 1
+    right = np.where(low & (cols > am), cols, prof.shape[1]).min(1) + 1
+    wts = np.where((cols > left[:, None]) & (cols < right[:, None]), wts, 0.0)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        off = (wts * offs).sum(1) / wts.sum(1)
+    ok = (peak > min_contrast) & (left >= 0) & (right <= prof.shape[1] - 1) & np.isfinite(off)
+    return off, ok
+
+
+def _median(x):
+    """Median of a 1-D array (``np.partition``; avoids ``np.median``'s overhead on small arrays)."""
+    n = len(x)
+    k = n // 2
+    if n % 2:
+        return float(np.partition(x, k)[k])
+    part = np.partition(x, (k - 1, k))
+    return 0.5 * float(part[k - 1] + part[k])
+
+
+def _robust_fit(points, iters=3, min_scale_px=0.1):
+    """Line fit that drops points beyond 3.5 robust sd (MAD, at least ``min_scale_px``).
+
+    A clean line's centres scatter by ~0.05 px; where the athlete's legs or shadow
+    cross it they move by 0.2-1 px, which a coarser floor would keep.
+    """
+    line = _fit_line(points)
+    keep = np.ones(len(points), bool)
+    for _ in range(iters):
+        r = np.abs(points @ line[:2] + line[2])
+        s = max(1.4826 * _median(r[keep]), min_scale_px)
+        new_keep = r < 3.5 * s
+        if np.array_equal(new_keep, keep):
+            break  # the same points again: the same line
+        keep = new_keep
+        if keep.sum() < 4:
+            break
+        line = _fit_line(points[keep])
+    return line, keep
+
+
+def _sagitta(points, line, with_residual=False):
+    """Largest deviation of a quadratic fit from the straight line (px): curvature measure.
+
+    With ``with_residual`` also the RMS residual (px) of the quadratic fit: a
+    clean curve (a bend's arc) has a small one, clutter a large one.
+    """
+    n = line[:2]
+    d = np.array([-n[1], n[0]])
+    t = points @ d
+    r = points @ n + line[2]
+    if np.ptp(t) < 1e-6:
+        return (0.0, 0.0) if with_residual else 0.0
+    tt = (t - t.mean()) / (np.ptp(t) / 2)
+    V = np.column_stack([tt * tt, tt, np.ones_like(tt)])
+    coef = np.linalg.solve(V.T @ V, V.T @ r)  # quadratic least squares (well conditioned: tt in [-1, 1])
+    if with_residual:
+        return abs(coef[0]), float(np.sqrt(np.mean((V @ coef - r) ** 2)))
+    return abs(coef[0])  # quadratic term at the ends of the support

@@ -1,0 +1,160 @@
+"""Following lane lines from frame to frame (a full detection every few frames).
+
+Lines are re-measured around a prediction from the global image motion (phase correlation);
+a followed line whose fit scatter jumps sends its frame back to full detection, and line
+identities are kept across the clip.
+"""
+
+from __future__ import annotations
+
+from dataclasses import replace
+
+import cv2
+import numpy as np
+
+from .detection import (
+    _dedupe,
+    _image_chord,
+    _measure_candidates,
+    _pencil_from_candidates,
+    detect_lanes,
+)
+from .mask import athlete_mask
+from .types import FrameLanes, LaneDetectorConfig
+
+__all__ = ["track_lanes"]
+
+
+def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypoints_px=None):
+    """Lanes of a frame sequence, following the lines from frame to frame.
+
+    The broadcast camera moves smoothly, so each frame's lines are first
+    re-measured around the previous frame's lines (no Hough transform); a full
+    :func:`detect_lanes` runs on the first frame, every ``redetect_every``
+    frames (to pick up lines entering the view), and whenever following loses
+    a line or fails.
+
+    Parameters
+    ----------
+    frames : iterable of (index, image or None)
+    config : LaneDetectorConfig
+    keypoints_px : ndarray (F, 17, 2 or 3), optional
+        The athlete's 2-D keypoints by frame index: line evidence near the athlete
+        (:func:`athlete_mask`) is ignored.
+
+    Returns
+    -------
+    list of FrameLanes
+    """
+    out = []
+    prev = last_ok = None
+    next_id = 0
+    prev_small = window = None
+    for k, (i, img) in enumerate(frames):
+        fl = None
+        shift = np.zeros(2)
+        small = None
+        exclude = (athlete_mask(keypoints_px[i]) if keypoints_px is not None and 0 <= i < len(keypoints_px)
+                   else None)
+        if img is not None and getattr(img, "ndim", 0) == 3 and img.size:
+            # global image motion from the previous frame (phase correlation of a small grey
+            # copy): predicts where the lines went when the camera pans or shakes
+            scale = 320.0 / img.shape[1]
+            step = max(1, img.shape[1] // 640)  # cheap pre-decimation; phase correlation is coarse anyway
+            small = cv2.cvtColor(cv2.resize(img[::step, ::step], (320, max(8, int(round(img.shape[0] * scale)))),
+                                            interpolation=cv2.INTER_AREA),
+                                 cv2.COLOR_BGR2GRAY).astype(np.float32)
+            if prev_small is not None and prev_small.shape == small.shape:
+                if window is None or window.shape != small.shape:
+                    window = cv2.createHanningWindow(small.shape[::-1], cv2.CV_32F)
+                (dx, dy), resp = cv2.phaseCorrelate(prev_small, small, window)
+                if resp > 0.05:
+                    shift = np.array([dx, dy]) / scale
+        if prev is not None and prev.ok and small is not None and k % max(config.redetect_every, 1):
+            size = (img.shape[1], img.shape[0])
+            chords = [c for c in (_image_chord(_translate(ln.line, shift), size) for ln in prev.lines)
+                      if c is not None]
+            cands, (n_curved, curved_len) = _measure_candidates(img, chords, config, distinct=True,
+                                                                exclude=exclude)
+            if len(cands) >= max(config.min_lines, len(prev.lines) - 1):
+                fl = _pencil_from_candidates(_dedupe(cands, config),
+                                             FrameLanes(status="no_lines", image_size=size, frame=i,
+                                                        n_curved=n_curved,
+                                                        extra={"curved_length_px": curved_len}), config)
+                if not fl.ok or len(fl.lines) < len(prev.lines) - 1 or \
+                        max(ln.rms_px for ln in fl.lines) > _track_rms_bound(prev, config):
+                    fl = None
+        if fl is None:
+            fl = detect_lanes(img, config, frame=i, exclude=exclude)
+        if fl.ok:
+            ref = prev if prev is not None else last_ok
+            fl, next_id = _assign_track_ids(fl, ref, next_id, shift if ref is prev else np.zeros(2))
+            last_ok = fl
+        out.append(fl)
+        prev = fl if fl.ok else None
+        prev_small = small
+    return out
+
+
+def _track_rms_bound(prev, config):
+    """Largest support scatter (px) accepted for a line followed from ``prev``.
+
+    When the predicted position is off by a good part of the local line spacing
+    (the far end of a low camera's view, where the lines crowd together, after a
+    poor global-motion estimate), the intensity profiles jump between neighbouring
+    lines and the fit's scatter grows from ~0.1 px to several px.
+
+    >>> from probreg.lanes import FrameLanes, LaneDetectorConfig, LaneLine
+    >>> prev = FrameLanes(status="ok", lines=(LaneLine(np.array([0.0, 1.0, -5.0]), np.zeros((2, 2)), 0.1),))
+    >>> _track_rms_bound(prev, LaneDetectorConfig())
+    0.5
+    """
+    worst = max((ln.rms_px for ln in prev.lines), default=0.0)
+    return max(config.track_rms_px, config.track_rms_factor * worst)
+
+
+def _translate(line, shift):
+    """The image line moved by ``shift`` (px)."""
+    return np.array([line[0], line[1], line[2] - line[0] * shift[0] - line[1] * shift[1]])
+
+
+def _assign_track_ids(fl, ref, next_id, shift=(0.0, 0.0)):
+    """Give each line of ``fl`` the id of the line of ``ref`` it continues (new ids otherwise).
+
+    Both frames' lines are ordered across the track, so the correspondence is
+    an index shift: the shift with the smallest mean distance between matched
+    lines wins if that distance is well below the spacing of neighbouring
+    lines (the camera moves by less than half a lane between frames).
+    """
+    ids = [None] * len(fl.lines)
+    if ref is not None and ref.ok and len(ref.lines) >= 2:
+        # a dozen points per line are plenty to tell which line continues which
+        pts = [ln.points_px[:: max(1, len(ln.points_px) // 12)] for ln in fl.lines]
+        ref_pts = [r.points_px[:: max(1, len(r.points_px) // 12)] for r in ref.lines]
+        spacing = np.median([np.median(np.abs(a @ b.line[:2] + b.line[2]))
+                             for a, b in zip(ref_pts[:-1], ref.lines[1:])])
+        # the predicted image motion first; no motion when that finds no match (the
+        # global-motion estimate can be fooled by the athlete, who stays in the middle
+        # of a following camera's view)
+        for motion in ([shift, (0.0, 0.0)] if np.any(np.asarray(shift) != 0) else [shift]):
+            ref_lines = np.array([_translate(r.line, motion) for r in ref.lines])  # (m, 3)
+            D = np.array([np.median(np.abs(p @ ref_lines[:, :2].T + ref_lines[:, 2]), axis=0) for p in pts])
+            best, best_cost = None, np.inf
+            n, m = D.shape
+            for k_shift in range(-(n - 1), m):
+                pairs = [(k, k + k_shift) for k in range(n) if 0 <= k + k_shift < m]
+                if len(pairs) < min(2, n, m):
+                    continue
+                cost = float(np.mean([D[k, j] for k, j in pairs]))
+                if cost < best_cost:
+                    best, best_cost = pairs, cost
+            if best is not None and best_cost < 0.35 * spacing:
+                for k, j in best:
+                    ids[k] = ref.lines[j].track_id
+                break
+    for k in range(len(ids)):
+        if ids[k] is None:
+            ids[k] = next_id
+            next_id += 1
+    lines = tuple(replace(ln, track_id=i) for ln, i in zip(fl.lines, ids))
+    return replace(fl, lines=lines), next_id

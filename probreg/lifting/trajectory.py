@@ -1,0 +1,417 @@
+"""Ground contacts and the athlete's line of travel: ray-cast feet, Kalman filter, RTS smoother.
+
+A foot in contact is momentarily still on the ground: its ankle, cast onto
+the plane of the ankle height, stops moving while the athlete runs on.  A
+swinging ankle cast onto that plane lands beyond the athlete and moves at
+about twice the running speed.  Each contact gives one point; a
+constant-velocity Kalman filter with an RTS smoother (``filterpy``) over
+those points yields the athlete's ground track in every frame, flight phases
+included, with a covariance, the running direction ``f`` and so the sagittal
+plane.  The filter's log-likelihood measures how smooth a runner's path this
+camera hypothesis implies (the Bayesian model uses it).
+"""
+
+from __future__ import annotations
+
+import warnings
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry import JOINT_INDEX
+
+__all__ = ["GroundTrack", "TrackConfig", "cast_ankles", "detect_contacts", "fit_ground_track", "sagittal_ankle_points", "sagittal_ankle_height", "gate_contacts_by_height"]
+
+
+@dataclass(frozen=True)
+class TrackConfig:
+    """Noise model of the ground-track filter.
+
+    Attributes
+    ----------
+    accel_std_mps2 : (float, float)
+        Process noise (white acceleration) along and across the track: a runner
+        on a straight changes speed a little and drifts laterally even less.
+    contact_std_m : (float, float)
+        Scatter of a contact point about the athlete's track at mid-stance, along
+        (foot placement ahead of or behind the centre of mass) and across (after
+        removing half the step width, estimated from the clip's left and right contacts).
+    contact_speed_frac : float
+        A cast ankle slower than this fraction of the running speed is in contact.
+    min_contact_frames : int
+    max_gap_s : float
+        Two contacts of one foot closer in time than this are one stance: a foot
+        cannot swing through in 0.1 s (a runner's swing takes 0.25 s or more), and a
+        stance split in two gives two footprints at one place a few frames apart,
+        which read as the athlete standing still.
+    contact_height_margin_m : float or None
+        Height gate on the ends of each detected contact: frames where the ankle, cast onto
+        the athlete's vertical sagittal plane, is more than this above its median height in
+        contact are cut from the start and end of the contact.  In late swing a runner
+        pulls the foot back towards the ground speed (foot retraction), so the speed test
+        alone takes the last frames before touchdown (ankle still ~0.2 m up) for contact;
+        this made contacts 50-80 ms too long for high and telephoto views.  0.06 m was
+        chosen on the benchmark suite (``reports/bench_posterior.md``); None disables it.
+    max_rejected_run : int
+        Contacts whose innovation fails the filter's 4-sigma gate are skipped, but after
+        this many in a row the next one re-starts the filter from it (position and
+        velocity as uncertain as at the start): once the filter's velocity is wrong,
+        every later footprint fails the gate, and without a restart the track coasts at
+        that velocity to the end of the clip.
+    """
+
+    accel_std_mps2: tuple = (1.5, 0.6)
+    contact_std_m: tuple = (0.10, 0.03)
+    contact_speed_frac: float = 0.35
+    min_contact_frames: int = 2
+    max_gap_s: float = 0.1
+    contact_height_margin_m: float | None = 0.06
+    max_rejected_run: int = 2
+
+
+@dataclass(frozen=True)
+class GroundTrack:
+    """The athlete's ground track (track frame, metres).
+
+    Attributes
+    ----------
+    position_m, velocity_mps : ndarray, shape (F, 2)
+        Smoothed ``(x, y)`` and its rate.
+    cov : ndarray, shape (F, 4, 4)
+        Covariance of ``(x, vx, y, vy)``.
+    contacts : ndarray of bool, shape (F, 2)
+        ``[left, right]`` foot on the ground.
+    contact_points_m : ndarray, shape (K, 4)
+        ``(frame, side, x, y)`` of every contact (side 0 = left, 1 = right).
+    log_likelihood : float
+        Sum of the filter's measurement log-likelihoods.
+    status : str
+        ``ok`` or the reason the track is a fallback (``few_contacts``, ``no_feet``).
+    half_step_m : float
+        Half the lateral distance between left and right footprints.
+    """
+
+    position_m: np.ndarray
+    velocity_mps: np.ndarray
+    cov: np.ndarray
+    contacts: np.ndarray
+    contact_points_m: np.ndarray
+    log_likelihood: float
+    status: str = "ok"
+    half_step_m: float = 0.0
+
+    @property
+    def forward(self):
+        """Unit running direction per frame, shape (F, 3) (horizontal)."""
+        v = self.velocity_mps
+        n = np.linalg.norm(v, axis=1, keepdims=True)
+        f = np.where(n > 1e-6, v / np.maximum(n, 1e-12), [1.0, 0.0])
+        return np.column_stack([f, np.zeros(len(f))])
+
+    @property
+    def left(self):
+        """Unit left direction per frame (``z x f``), the sagittal plane's normal, shape (F, 3)."""
+        f = self.forward
+        return np.column_stack([-f[:, 1], f[:, 0], np.zeros(len(f))])
+
+
+def _rays(cameras, pts_px):
+    """Per-frame rays: origins (F, 3) and unit directions (F, K, 3); NaN where no camera.
+
+    ``cameras`` is a list of Camera/None or a :class:`probreg.lifting.CameraArrays`.
+    """
+    from ..geometry import CameraArrays, camera_arrays, pixel_rays
+
+    arr = cameras if isinstance(cameras, CameraArrays) else camera_arrays(cameras)
+    return arr.C, pixel_rays(arr, pts_px)
+
+
+def cast_ankles(cameras, keypoints_px, ankle_height_m=0.07):
+    """Ankles ``[left, right]`` cast onto the plane ``z = ankle_height_m``: (F, 2, 3), NaN if missing."""
+    kp = np.asarray(keypoints_px, float)[:, [JOINT_INDEX["l_ankle"], JOINT_INDEX["r_ankle"]], :2]
+    o, d = _rays(cameras, kp)
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = (ankle_height_m - o[:, None, 2]) / d[..., 2]
+    t = np.where(t > 0, t, np.nan)
+    return o[:, None, :] + t[..., None] * d
+
+
+def detect_contacts(ankles_m, fps, config: TrackConfig = TrackConfig(), camera_xy=None):
+    """Contact flags ``[left, right]`` (F, 2) from the along-track speed of the cast ankles.
+
+    Only the component along the running direction is used: across the track
+    (in depth, for a broadcast camera) a cast point inherits the keypoint noise
+    amplified by the grazing view of the ground, along the track it does not.
+
+    With the camera's ground position ``camera_xy`` (F, 2), the along-track speed
+    is read from the ankle's motion *across the viewing ray* only (divided by the
+    share of the running direction across the ray).  Along the ray a cast point
+    also moves when the ankle merely rises or sinks (by ``dz / tan(elevation)``),
+    which for a low camera looking obliquely along the straight is metres per
+    second during stance and hides every contact.  Frames seen nearly along the
+    running direction (share < 0.3) keep the plain along-track speed.
+    """
+    F = len(ankles_m)
+    xy = ankles_m[..., :2]
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN frames stay NaN
+        body = np.nanmean(xy, axis=1)
+    ok = np.all(np.isfinite(body), -1)
+    direction = np.array([1.0, 0.0])
+    if ok.sum() >= 2:
+        d = body[np.flatnonzero(ok)[-1]] - body[np.flatnonzero(ok)[0]]
+        if np.linalg.norm(d) > 1e-6:
+            direction = d / np.linalg.norm(d)
+    along = xy @ direction  # (F, 2)
+    # 5-frame smoothed central difference (nan-aware): speed along the track
+    speed = np.full((F, 2), np.nan)
+    if F >= 5:
+        speed[2:-2] = (along[4:] - along[:-4]) * fps / 4
+    elif F >= 3:
+        speed[1:-1] = (along[2:] - along[:-2]) * fps / 2
+    if camera_xy is not None and F >= 5:
+        ray = xy - np.asarray(camera_xy, float)[:, None, :]
+        with np.errstate(invalid="ignore", divide="ignore"):
+            ray = ray / np.linalg.norm(ray, axis=-1, keepdims=True)
+            across = np.stack([-ray[..., 1], ray[..., 0]], -1)  # (F, 2, 2): unit, across the ray
+            share = across @ direction  # running direction's component across the ray
+            vel = np.full((F, 2, 2), np.nan)
+            vel[2:-2] = (xy[4:] - xy[:-4]) * fps / 4
+            est = np.sum(vel * across, -1) / share
+        use = np.isfinite(est) & (np.abs(share) >= 0.3)
+        speed = np.where(use, est, speed)
+    with np.errstate(invalid="ignore"):
+        run = np.nanmedian(np.abs(np.diff(body @ direction))) * fps if ok.sum() > 1 else np.nan
+        run = np.nanmedian(np.abs(speed)) if not np.isfinite(run) else run
+    thr = config.contact_speed_frac * run if np.isfinite(run) and run > 0.5 else 1.0
+    with np.errstate(invalid="ignore"):
+        contact = np.abs(speed) < thr
+    out = np.zeros((F, 2), bool)
+    max_gap = int(np.floor(config.max_gap_s * fps))
+    for s in (0, 1):
+        edges = np.diff(np.concatenate([[0], contact[:, s].astype(int), [0]]))
+        runs = list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)))
+        merged = []
+        for a, b in runs:  # one stance split by a few noisy frames is still one stance
+            if merged and a - merged[-1][1] <= max_gap:
+                merged[-1] = (merged[-1][0], b)
+            else:
+                merged.append((a, b))
+        for a, b in merged:
+            if b - a >= config.min_contact_frames:
+                out[a:b, s] = True
+    return out
+
+
+def _contact_points(ankles_m, contacts):
+    pts = []
+    for s in (0, 1):
+        c = contacts[:, s]
+        edges = np.diff(np.concatenate([[0], c.astype(int), [0]]))
+        for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
+            # the first half of the contact is foot-flat; later the heel rises and the
+            # raised ankle, cast onto the ankle-height plane, lands beyond the foot
+            run = ankles_m[a:a + max(1, (b - a + 1) // 2), s, :2]
+            ok = np.all(np.isfinite(run), -1)
+            if ok.any():
+                x, y = np.median(run[ok], axis=0)
+                pts.append(((a + b - 1) / 2, s, x, y))
+    pts.sort()
+    return np.array(pts, float).reshape(-1, 4)
+
+
+def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: TrackConfig = TrackConfig(),
+                     contacts=None):
+    """Contacts and the Kalman/RTS-smoothed ground track of the athlete.
+
+    Parameters
+    ----------
+    cameras : list of Camera or None (length F), or CameraArrays
+    keypoints_px : ndarray, shape (F, 17, 3)
+        H36M-17 keypoints; NaN = missing.
+    fps : float
+    ankle_height_m : float
+        Height of the ankle joint centre above the ground in stance.
+    contacts : ndarray of bool (F, 2), optional
+        Fixed contact flags (e.g. detected once for a reference camera), so that
+        the filter sees the same measurements under every camera hypothesis.
+
+    Returns
+    -------
+    GroundTrack
+    """
+    from ..geometry import CameraArrays, camera_arrays
+
+    if not isinstance(cameras, CameraArrays):  # stacked once, used three times below
+        cameras = camera_arrays(cameras)
+    F = len(keypoints_px)
+    ankles = cast_ankles(cameras, keypoints_px, ankle_height_m)
+    if contacts is not None:
+        return _track_from_contacts(ankles, np.asarray(contacts, bool), fps, config)
+    contacts = detect_contacts(ankles, fps, config, camera_xy=_rays(cameras, np.zeros((F, 0, 2)))[0][:, :2])
+    first = _track_from_contacts(ankles, contacts, fps, config)
+    if config.contact_height_margin_m is None or first.status != "ok":
+        return first
+    z = sagittal_ankle_height(cameras, keypoints_px, first)
+    gated = gate_contacts_by_height(contacts, z, config.contact_height_margin_m, config.min_contact_frames)
+    if np.array_equal(gated, contacts) or not gated.any():
+        return first
+    return _track_from_contacts(ankles, gated, fps, config)
+
+
+def sagittal_ankle_points(cameras, keypoints_px, track: GroundTrack):
+    """Ankles ``[left, right]`` cast onto the athlete's vertical plane: (F, 2, 3), NaN where missing.
+
+    The plane is the track's line of travel shifted by half the step width to the foot's
+    side (left feet land left of it).  A broadcast camera sees this plane nearly face-on,
+    so the cast point's height tells a foot in late swing (0.2 m up) from a foot on the
+    ground, which the ground plane cannot do, and its along-track position does not move
+    when the ankle merely rises.
+    """
+    kp = np.asarray(keypoints_px, float)[:, [JOINT_INDEX["l_ankle"], JOINT_INDEX["r_ankle"]], :2]
+    o, d = _rays(cameras, kp)
+    y0 = track.position_m[:, 1][:, None] + np.array([1.0, -1.0]) * track.half_step_m
+    with np.errstate(invalid="ignore", divide="ignore"):
+        t = (y0 - o[:, None, 1]) / d[..., 1]
+        P = o[:, None, :] + t[..., None] * d
+    return np.where((np.isfinite(t) & (t > 0))[..., None], P, np.nan)
+
+
+def sagittal_ankle_height(cameras, keypoints_px, track: GroundTrack):
+    """Height (m) of each ankle ``[left, right]`` on the athlete's vertical plane
+    (:func:`sagittal_ankle_points`): (F, 2), NaN where missing."""
+    return sagittal_ankle_points(cameras, keypoints_px, track)[..., 2]
+
+
+def gate_contacts_by_height(contacts, height_m, margin_m, min_frames=2):
+    """Cut frames from the start and end of every contact while the ankle is too high.
+
+    ``height_m`` (F, 2) is the ankle height (e.g. :func:`sagittal_ankle_height`); a frame
+    is too high when it exceeds the median height over all contact frames by more than
+    ``margin_m``.  Frames inside a contact are kept (a noisy frame does not split a
+    stance); contacts left shorter than ``min_frames`` are dropped.
+
+    >>> c = np.array([[0, 1, 1, 1, 1, 1, 0]] * 2, bool).T
+    >>> z = np.array([[0.3, 0.2, 0.07, 0.3, 0.08, 0.09, 0.3]] * 2).T
+    >>> gate_contacts_by_height(c, z, 0.05)[:, 0].astype(int).tolist()
+    [0, 0, 1, 1, 1, 1, 0]
+    """
+    c = np.asarray(contacts, bool)
+    z = np.asarray(height_m, float)
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        ref = np.nanmedian(z[c]) if c.any() else np.nan
+    if not np.isfinite(ref):
+        return c.copy()
+    high = np.nan_to_num(z, nan=-np.inf) > ref + margin_m  # a missing height does not cut
+    out = np.zeros_like(c)
+    for s in range(c.shape[1]):
+        for a, b in _runs(c[:, s]):
+            while a < b and high[a, s]:
+                a += 1
+            while b > a and high[b - 1, s]:
+                b -= 1
+            if b - a >= min_frames:
+                out[a:b, s] = True
+    return out
+
+
+def _track_from_contacts(ankles, contacts, fps, config):
+    """The Kalman/RTS ground track from cast ankles (F, 2, 3) and fixed contact flags."""
+    from filterpy.common import Q_discrete_white_noise
+    from filterpy.kalman import KalmanFilter
+
+    F = len(ankles)
+    cps = _contact_points(ankles, contacts)
+    if len(cps) >= 3:
+        # athletes keep to their lane: a "contact" far off the clip's median lateral position
+        # is a swinging foot cast beyond the athlete, not a footprint
+        off = np.abs(cps[:, 3] - np.median(cps[:, 3]))
+        cps = cps[off < max(0.5, 4 * 1.4826 * np.median(off))]
+    status = "ok"
+    R_meas = np.diag(np.square(np.asarray(config.contact_std_m)))
+    # left feet land left of the line of travel, right feet right of it: remove half the
+    # step width (estimated from the clip) so that contacts measure the centre line
+    half_step = 0.0
+    lat = np.array([0.0, 1.0])  # on the straight the athlete runs along x: lateral is y
+    if len(cps) >= 2 and (cps[:, 1] == 0).any() and (cps[:, 1] == 1).any():
+        off = cps[:, 2:] @ lat
+        half_step = 0.5 * (np.median(off[cps[:, 1] == 0]) - np.median(off[cps[:, 1] == 1]))
+        half_step = float(np.clip(half_step, 0.0, 0.25))
+        centred = cps[:, 2:] - np.where(cps[:, 1:2] == 0, 1.0, -1.0) * half_step * lat
+    else:
+        centred = cps[:, 2:]
+    meas = {int(round(c[0])): p for c, p in zip(cps, centred)}
+    if len(cps) < 2:
+        # fallback: per-frame mean of the cast ankles, heavily de-weighted
+        status = "few_contacts" if np.isfinite(ankles).any() else "no_feet"
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            body = np.nanmean(ankles[..., :2], axis=1) if np.isfinite(ankles).any() else np.full((F, 2), np.nan)
+        meas = {i: body[i] for i in range(F) if np.all(np.isfinite(body[i]))}
+        R_meas = np.diag([0.5**2, 0.3**2])
+    dt = 1.0 / fps
+    kf = KalmanFilter(dim_x=4, dim_z=2)
+    kf.F = np.kron(np.eye(2), np.array([[1.0, dt], [0.0, 1.0]]))
+    kf.H = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
+    kf.Q = np.zeros((4, 4))
+    kf.Q[:2, :2] = Q_discrete_white_noise(2, dt=dt, var=config.accel_std_mps2[0] ** 2)
+    kf.Q[2:, 2:] = Q_discrete_white_noise(2, dt=dt, var=config.accel_std_mps2[1] ** 2)
+    kf.R = R_meas
+    keys = sorted(meas)
+    if not keys:
+        nan = np.full((F, 2), np.nan)
+        return GroundTrack(nan, nan, np.full((F, 4, 4), np.nan), contacts, cps, -np.inf, "no_feet")
+    # initial state from the first measurements
+    if len(keys) >= 2:
+        k0, k1 = keys[0], keys[-1]
+        v0 = (meas[k1] - meas[k0]) / max((k1 - k0) * dt, dt)
+    else:
+        v0 = np.zeros(2)
+    v0[1] = 0.0  # athletes follow their lane: start with no lateral velocity
+    p0 = meas[keys[0]] - v0 * keys[0] * dt
+    # the lateral start is the footprints' median, as uncertain as their spread: started on
+    # the first footprint (a swinging foot taken for a contact, say), the filter would gate
+    # out every true footprint after it and keep the athlete in the wrong place
+    lat0 = np.array([meas[k][1] for k in keys])
+    p0[1] = float(np.median(lat0))
+    sd0 = 1.4826 * float(np.median(np.abs(lat0 - p0[1]))) if len(keys) >= 3 else 0.7
+    kf.x = np.array([p0[0], v0[0], p0[1], v0[1]])
+    kf.P = np.diag([4.0, 4.0, float(np.clip(sd0, 0.05, 0.7)) ** 2, 0.1**2])
+    xs, Ps = np.zeros((F, 4)), np.zeros((F, 4, 4))
+    loglik = 0.0
+    run_rejected = 0
+    P0 = kf.P.copy()
+    for i in range(F):
+        if i > 0:
+            kf.predict()
+        if i in meas:
+            # gate outliers: an innovation beyond ~4 sigma (chi-square, 2 dof, p ~ 3e-4) is
+            # not used, but still costs its log-likelihood so hypotheses cannot hide data
+            y = meas[i] - kf.H @ kf.x
+            S = kf.H @ kf.P @ kf.H.T + kf.R
+            nis = float(y @ np.linalg.solve(S, y))
+            rejected = nis > 16.0 and i != keys[0]
+            # the innovation's Gaussian log-density (what ``kf.log_likelihood`` gives, without
+            # scipy's per-call overhead), its exponent capped at the gate for a rejected one
+            loglik += -0.5 * (16.0 if rejected else nis) - 0.5 * float(np.log(np.linalg.det(2 * np.pi * S)))
+            if rejected:
+                if run_rejected < config.max_rejected_run:
+                    run_rejected += 1
+                else:
+                    # a run of rejections: the filter, not the footprints, went astray
+                    kf.P = P0.copy()
+                    kf.update(meas[i])
+                    run_rejected = 0
+            else:
+                kf.update(meas[i])
+                run_rejected = 0
+        xs[i], Ps[i] = kf.x, kf.P
+    xs, Ps, _, _ = kf.rts_smoother(xs, Ps)
+    return GroundTrack(position_m=xs[:, [0, 2]], velocity_mps=xs[:, [1, 3]], cov=Ps, contacts=contacts,
+                       contact_points_m=cps, log_likelihood=loglik, status=status, half_step_m=half_step)
+
+
+def _runs(flags):
+    edges = np.diff(np.concatenate([[0], np.asarray(flags, int), [0]]))
+    return list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)))

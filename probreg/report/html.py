@@ -1,0 +1,236 @@
+"""Self-contained HTML reports (figures embedded as PNG) that open in any browser or notebook."""
+
+from __future__ import annotations
+
+import base64
+import html
+import io
+from pathlib import Path
+
+import cv2
+import numpy as np
+
+from ..geometry import BONES, JOINT_INDEX, joint_angles
+
+__all__ = ["HtmlReport", "draw_skeleton", "clip_report"]
+
+
+_CSS = """body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;color:#222}
+table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}
+th{background:#f3f3f3}img{max-width:100%}figure{margin:1em 0}figcaption{color:#555;font-size:90%}
+.note{color:#555;font-size:90%}"""
+
+class HtmlReport:
+    """Builds one HTML page section by section.
+
+    >>> r = HtmlReport("t"); r.paragraph("hello"); "hello" in r.html()
+    True
+    """
+
+    def __init__(self, title):
+        self.title = title
+        self.parts = []
+
+    def heading(self, text, level=2):
+        self.parts.append(f"<h{level}>{html.escape(text)}</h{level}>")
+
+    def paragraph(self, text, cls=None):
+        c = f' class="{cls}"' if cls else ""
+        self.parts.append(f"<p{c}>{html.escape(text)}</p>")
+
+    def table(self, header, rows, fmt="{:.2f}"):
+        def cell(v):
+            if isinstance(v, (float, np.floating)):
+                return "n/a" if not np.isfinite(v) else fmt.format(v)
+            return html.escape(str(v))
+        head = "".join(f"<th>{html.escape(str(h))}</th>" for h in header)
+        body = "".join("<tr>" + "".join(f"<td>{cell(v)}</td>" for v in r) + "</tr>" for r in rows)
+        self.parts.append(f"<table><tr>{head}</tr>{body}</table>")
+
+    def figure(self, fig, caption=""):
+        """Embed a matplotlib figure (closed afterwards)."""
+        import matplotlib.pyplot as plt
+
+        buf = io.BytesIO()
+        fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
+        plt.close(fig)
+        self._png(buf.getvalue(), caption)
+
+    def image(self, img_bgr, caption="", max_width=960):
+        """Embed an OpenCV image (BGR), downscaled to ``max_width``."""
+        h, w = img_bgr.shape[:2]
+        if w > max_width:
+            img_bgr = cv2.resize(img_bgr, (max_width, int(h * max_width / w)), interpolation=cv2.INTER_AREA)
+        ok, png = cv2.imencode(".png", img_bgr)
+        if ok:
+            self._png(png.tobytes(), caption)
+
+    def _png(self, data, caption):
+        b64 = base64.b64encode(data).decode("ascii")
+        cap = f"<figcaption>{html.escape(caption)}</figcaption>" if caption else ""
+        self.parts.append(f'<figure><img src="data:image/png;base64,{b64}">{cap}</figure>')
+
+    def html(self):
+        return (f"<!DOCTYPE html><html><head><meta charset='utf-8'><title>{html.escape(self.title)}"
+                f"</title><style>{_CSS}</style></head><body><h1>{html.escape(self.title)}</h1>"
+                + "\n".join(self.parts) + "</body></html>")
+
+    def save(self, path):
+        Path(path).write_text(self.html(), encoding="utf-8")
+        return Path(path)
+
+
+def draw_skeleton(img, joints_px, color=(0, 255, 255), thickness=2):
+    """Draw an H36M-17 skeleton (F=1, 17, 2+) on a BGR image in place; NaN joints are skipped."""
+    p = np.asarray(joints_px, float)
+    for a, b in BONES:
+        pa, pb = p[JOINT_INDEX[a], :2], p[JOINT_INDEX[b], :2]
+        if np.all(np.isfinite(pa)) and np.all(np.isfinite(pb)):
+            cv2.line(img, tuple(int(v) for v in np.round(pa)), tuple(int(v) for v in np.round(pb)),
+                     color, thickness, cv2.LINE_AA)
+    for q in p:
+        if np.all(np.isfinite(q[:2])):
+            cv2.circle(img, tuple(int(v) for v in np.round(q[:2])), thickness + 1, color, -1, cv2.LINE_AA)
+    return img
+
+
+def clip_report(clip_dir, out_html):
+    """Overview of a synthetic clip: a frame with keypoints, camera and gait ground truth."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..io.clip import load_clip, load_groundtruth
+
+    clip = load_clip(clip_dir)
+    gt = load_groundtruth(clip_dir)
+    rep = HtmlReport(f"probreg synthetic clip: {Path(clip_dir).name}")
+    ath = gt.athlete
+    cams = gt.cameras
+    rep.heading("Clip")
+    gen = clip.meta.get("generator", {})
+    rep.table(["field", "value"], [
+        ["frames", clip.n_frames], ["fps", clip.fps], ["image size", f"{clip.image_size[0]}x{clip.image_size[1]}"],
+        ["preset / seed", f"{gen.get('preset')} / {gen.get('seed')}"], ["style", ath.get("style")],
+        ["athlete lane", clip.athlete_lane], ["stature (m)", ath["stature_m"]],
+        ["speed (m/s)", ath["gait"]["speed_mps"]], ["step frequency (steps/s)", ath["gait"]["step_freq_hz"]],
+        ["camera height (m)", cams[0].C[2]], ["camera centre (m)", np.round(cams[0].C, 2).tolist()],
+        ["FOV range (deg)", f"{min(c.fov_deg for c in cams):.2f}-{max(c.fov_deg for c in cams):.2f}"],
+        ["lens distortion", np.round(cams[0].dist, 3).tolist()],
+    ])
+    if clip.frame_paths:
+        mid = len(clip.frame_paths) // 2
+        img = cv2.imread(str(clip.frame_paths[mid]))
+        if img is not None:
+            draw_skeleton(img, gt.joints2d_px[mid], (0, 255, 0))
+            if clip.keypoints_px is not None:
+                draw_skeleton(img, clip.keypoints_px[mid], (0, 200, 255), 1)
+            rep.image(img, f"frame {mid}: ground-truth skeleton (green), detector-like keypoints (orange)")
+    ang = joint_angles(gt.joints3d_track_m)
+    t = np.arange(clip.n_frames) / clip.fps
+    fig, axes = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    for name in ("knee_l", "knee_r", "hip_l", "hip_r"):
+        axes[0].plot(t, ang[name], label=name)
+    axes[0].set_ylabel("angle (deg)")
+    axes[0].legend(ncol=4)
+    axes[1].fill_between(t, 0, gt.contacts[:, 0], step="mid", alpha=0.5, label="left contact")
+    axes[1].fill_between(t, 1.1, 1.1 + gt.contacts[:, 1], step="mid", alpha=0.5, label="right contact")
+    axes[1].set_yticks([])
+    axes[1].set_xlabel("time (s)")
+    axes[1].legend(ncol=2)
+    rep.figure(fig, "Ground-truth joint angles (CLIP_FORMAT definitions) and foot contacts")
+    return rep.save(out_html)
+
+
+def scale_note(stature_prior, stature_draws):
+    """What sets the metric scale of a run, in words for the report.
+
+    Lanes fix the camera only up to its one degree of freedom, and a 2D skeleton has
+    no size of its own: the athlete's stature prior, and the planted feet of a panning
+    camera (at a wrong scale they seem to slide; ``posterior.STILLNESS_SYS_SD``), turn
+    pixels into metres.  When the clip narrows the stature little beyond its prior, the
+    camera height, the limb lengths, step length and speed carry the prior's uncertainty
+    (joint angles do not depend on the scale).
+
+    >>> from probreg.inference.priors import NormalPrior
+    >>> rng = np.random.default_rng(0)
+    >>> "follows the stature prior" in scale_note(NormalPrior(1.76, 0.10), rng.normal(1.76, 0.095, 4000))
+    True
+    >>> "follows the stature prior" in scale_note(NormalPrior(1.76, 0.10), rng.normal(1.80, 0.02, 4000))
+    False
+    """
+    lo_p, hi_p = stature_prior.interval(0.9)
+    v = np.asarray(stature_draws, float)
+    v = v[np.isfinite(v)]
+    if len(v) < 2 or not hi_p > lo_p:
+        return "Metric scale: no stature draws to judge it by."
+    lo, hi = np.percentile(v, [5, 95])
+    med = float(np.median(v))
+    half = 50.0 * (hi - lo) / med
+    text = (f"Metric scale: athlete's stature {med:.2f} m, 90 % interval [{lo:.2f}, {hi:.2f}] "
+            f"(prior [{lo_p:.2f}, {hi_p:.2f}]).")
+    if (hi - lo) > 0.7 * (hi_p - lo_p):
+        text += (f" The clip adds little to the prior here, so the metric scale follows the stature prior: "
+                 f"camera height, limb lengths, step length and speed are uncertain by about +-{half:.0f} % "
+                 f"(90 %), and they are only as right as that prior for this athlete. Joint angles do not "
+                 f"depend on the scale. Give the athlete's measured stature (--stature, --stature-sd) to "
+                 f"pin it.")
+    return text
+
+
+def run_report(out_html, clip, result, joints_median, cameras):
+    """Report of a pipeline run: posterior of the calibration and the athlete, angle bands, gait."""
+    import matplotlib
+
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    from ..analysis import GAIT_FIELDS
+
+    rep = HtmlReport(f"probreg: {Path(str(clip.path)).name}")
+    d = result.diagnostics
+    h = result.height
+    post = result.posterior.posterior
+    rep.heading("Calibration and athlete (posterior median, 90 % interval)")
+    rows = [["camera height (m)", h["median"], h["lo"], h["hi"]]]
+    for var in ["stature", "thigh_m", "shank_m", "upper_arm_m", "forearm_m", "trunk_m"]:
+        v = post[var].values.ravel()
+        rows.append([var.replace("_m", " (m)"), float(np.median(v)), float(np.percentile(v, 5)),
+                     float(np.percentile(v, 95))])
+    rep.table(["quantity", "median", "5 %", "95 %"], rows, fmt="{:.3f}")
+    rep.paragraph(scale_note(result.model.priors.stature, post["stature"].values.ravel()), cls="note")
+    rep.paragraph(f"emcee: {d['walkers']} walkers x {d['steps']} steps, acceptance "
+                  f"{d['acceptance_fraction']:.2f}, max integrated autocorrelation time "
+                  f"{max(d['tau'].values()):.0f} steps ({d['steps_per_tau']:.0f} tau), ESS(height) "
+                  f"{d['ess_height']:.0f}, R-hat(height) {d['rhat_height']:.3f}.", cls="note")
+    t = np.arange(clip.n_frames) / clip.fps
+    fig, axes = plt.subplots(3, 1, figsize=(10, 9), sharex=True)
+    for ax, names in zip(axes, (("knee_l", "knee_r"), ("hip_l", "hip_r"), ("elbow_l", "elbow_r"))):
+        for name, col in zip(names, ("tab:blue", "tab:orange")):
+            med, lo, hi = result.angle_summary[name]
+            ax.fill_between(t, lo, hi, color=col, alpha=0.25, lw=0)
+            ax.plot(t, med, color=col, label=f"{name} (median, 90 % band)")
+        ax.set_ylabel("deg")
+        ax.legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time (s)")
+    rep.figure(fig, "Joint angles with 90 % credible bands (calibration, limb lengths and detector noise)")
+    rep.heading("Gait")
+    rep.table(["quantity", "median", "5 %", "95 %", "unit"],
+              [[k, v["median"], v["lo"], v["hi"], GAIT_FIELDS.get(k, "")] for k, v in result.gait.items()])
+    if clip.frame_paths:
+        mid = len(clip.frame_paths) // 2
+        img = cv2.imread(str(clip.frame_paths[mid]))
+        if img is not None and cameras[mid] is not None and np.all(np.isfinite(joints_median[mid])):
+            draw_skeleton(img, cameras[mid].project(joints_median[mid]), (0, 255, 0))
+            if clip.keypoints_px is not None:
+                draw_skeleton(img, clip.keypoints_px[mid], (0, 200, 255), 1)
+            rep.image(img, f"frame {mid}: posterior-median 3D skeleton re-projected (green), keypoints (orange)")
+    rep.heading("Timing")
+    rep.table(["stage", "seconds"], [[k, v] for k, v in result.timings.items()])
+    rep.paragraph("Uncertainty sources in the bands: the camera height (the one calibration degree of "
+                  "freedom), the athlete's limb lengths, and the 2D detector noise (re-simulated from the "
+                  "noise level estimated in this clip). Not included: errors of the lane-line detection "
+                  "beyond the per-frame fit, systematic detector bias, and model errors of the lifting.",
+                  cls="note")
+    return rep.save(out_html)

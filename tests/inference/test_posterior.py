@@ -1,0 +1,314 @@
+"""Known-answer tests of the Bayesian model and the `probreg run` pipeline (short chains)."""
+
+import json
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+
+from probreg.calibration import register_clip
+from probreg.cli import main
+from probreg.filtering import noise_model
+from probreg.inference import (
+    PARAM_NAMES,
+    ClipModel,
+    LogNormalPrior,
+    ModelPriors,
+    NormalPrior,
+    SamplerSettings,
+)
+from probreg.io import load_clip, load_groundtruth, read_angles_csv
+from probreg.pipeline import RunOptions, run_clip
+
+FAST = SamplerSettings(n_walkers=20, burn_in=100, chunk=150, max_steps=600, n_draws=12, seed=1)
+
+
+@pytest.fixture(scope="module")
+def model(small_clip):
+    clip = load_clip(small_clip)
+    gt = load_groundtruth(small_clip)
+    reg = register_clip(clip)
+    priors = ModelPriors.from_options(stature=gt.athlete["stature_m"], stature_sd=0.02)
+    return ClipModel(reg, clip.keypoints_px, clip.fps, clip.athlete_lane, priors=priors,
+                     dist=gt.cameras[0].dist), gt
+
+
+def test_posterior_covers_the_known_height_and_lengths(model):
+    m, gt = model
+    sampler, tau = m.sample(FAST)
+    chain = sampler.get_chain(flat=True)
+    h = np.exp(chain[:, 0])
+    h_true = gt.cameras[0].C[2]
+    lo, hi = np.percentile(h, [2.5, 97.5])
+    assert lo <= h_true <= hi or abs(np.median(h) - h_true) / h_true < 0.05
+    L = m.lengths(chain)
+    for seg in ("thigh", "shank"):
+        assert abs(np.median(L[seg]) - gt.athlete["segments_m"][seg]) < 0.06
+    acc = np.mean(sampler.acceptance_fraction)
+    assert 0.15 < acc < 0.8
+    assert np.all(np.isfinite(tau)) and tau.shape == (len(PARAM_NAMES),)
+
+
+def test_prior_only_run_recovers_the_prior(model, monkeypatch):
+    m, _ = model
+    monkeypatch.setattr(m, "log_likelihood", lambda theta: np.zeros(len(np.atleast_2d(theta))))
+    m.priors = ModelPriors()  # default stature prior N(1.76, 0.10)
+    sampler, _ = m.sample(SamplerSettings(n_walkers=24, burn_in=300, max_steps=1500, seed=2))
+    chain = sampler.get_chain(flat=True)
+    st = chain[:, 1]
+    assert abs(st.mean() - 1.76) < 0.03 and 0.07 < st.std() < 0.13
+    logh = chain[:, 0]
+    assert abs(np.exp(np.median(logh)) - 12.0) < 1.2 and 0.42 < logh.std() < 0.58
+
+
+def test_log_prob_is_vectorised_and_rejects_impossible_values(model):
+    m, gt = model
+    theta = np.tile(np.r_[np.log(gt.cameras[0].C[2]), 1.75, np.ones(7)], (5, 1))
+    theta[1, 1] = -1.0      # negative stature
+    theta[2, 0] = np.log(1e4)  # height outside the grid
+    lp = m.log_prob(theta)
+    assert lp.shape == (5,) and np.isfinite(lp[0]) and lp[1] == -np.inf and lp[2] == -np.inf
+    assert np.isclose(lp[0], lp[3])
+
+
+def test_noise_model_known_answer(rng):
+    n = 4000
+    e = np.zeros((n, 17, 2))
+    w = rng.standard_normal((n, 17, 2))
+    e[0] = w[0]
+    for t in range(1, n):
+        e[t] = 0.5 * e[t - 1] + np.sqrt(1 - 0.25) * w[t]
+    kp = np.concatenate([3.0 * e, np.ones((n, 17, 1))], -1)
+    sd, rho = noise_model(kp)
+    assert abs(sd - 3.0) < 0.3 and abs(rho - 0.5) < 0.1
+
+
+def test_priors_validate_and_report_intervals():
+    with pytest.raises(ValueError, match="sd"):
+        NormalPrior(1.7, 0.0)
+    with pytest.raises(ValueError, match="median"):
+        LogNormalPrior(-1.0, 0.5)
+    p = ModelPriors.from_options(height=20.0)
+    assert np.isclose(p.camera_height.centre(), 20.0)
+
+
+def test_run_pipeline_writes_the_result_layout(small_clip, tmp_path):
+    out = tmp_path / "res"
+    gt = load_groundtruth(small_clip)
+    res = run_clip(small_clip, out, RunOptions(sampler=FAST, dist=tuple(gt.cameras[0].dist)), log=lambda *a: None)
+    for name in ("angles.csv", "joints3d.npz", "camera.json", "posterior.nc", "report.html", "gait.json"):
+        assert (out / name).exists(), name
+    ang = read_angles_csv(out / "angles.csv")
+    frames, med, lo, hi = ang["knee_r"]
+    ok = np.isfinite(med)
+    assert ok.mean() > 0.9 and np.all(lo[ok] <= med[ok] + 1e-9) and np.all(med[ok] <= hi[ok] + 1e-9)
+    assert np.mean(hi[ok] - lo[ok]) > 0.5  # a band, not a line
+    npz = np.load(out / "joints3d.npz")
+    assert npz["samples"].shape[0] == FAST.n_draws and npz["median"].shape == (40, 17, 3)
+    cam = json.loads((out / "camera.json").read_text())
+    assert cam["height_m"]["lo"] <= cam["height_m"]["median"] <= cam["height_m"]["hi"]
+    import arviz as az
+
+    idata = az.from_netcdf(str(out / "posterior.nc"))
+    assert {"chain", "draw"} <= set(idata.posterior.dims) and "height_m" in idata.posterior
+    assert "keypoints_px" in idata.observed_data and "sample_stats" in idata.groups()
+    assert res.diagnostics["steps"] >= 150
+    # the report says what sets the metric scale (here: the default stature prior)
+    assert "Metric scale:" in (out / "report.html").read_text(encoding="utf-8")
+
+
+def test_missing_lanes_still_give_a_posterior_with_wider_bands(small_clip, tmp_path):
+    clip_dir = tmp_path / "clip"
+    shutil.copytree(small_clip, clip_dir)
+    blank = np.full((1080, 1920, 3), 90, np.uint8)
+    for i in range(14, 27):
+        cv2.imwrite(str(clip_dir / "frames" / f"{i:06d}.jpg"), blank)
+    out = tmp_path / "res"
+    gt = load_groundtruth(small_clip)
+    run_clip(clip_dir, out, RunOptions(sampler=FAST, dist=tuple(gt.cameras[0].dist), report=False),
+             log=lambda *a: None)
+    status = json.loads((out / "run.json").read_text())["frame_status"]
+    assert status[20] == "bridged" and status[5] == "ok"
+    ang = read_angles_csv(out / "angles.csv")
+    _, med, lo, hi = ang["knee_r"]
+    assert np.all(np.isfinite(med[14:27]))  # bridged frames still get angles and bands
+    # the camera of a bridged frame is uncertain: the athlete's position along the track
+    # (one ray through an uncertain pan) scatters more in the middle of the gap.  Each draw's
+    # smooth trend (set by its camera height) is removed first.
+    x = np.load(out / "joints3d.npz")["samples"][:, :, 0, 0].astype(float)  # pelvis x, (S, F)
+    t = np.arange(x.shape[1])
+    resid = np.array([xs - np.polyval(np.polyfit(t, xs, 3), t) for xs in x])
+    spread = np.std(resid, axis=0)
+    assert np.mean(spread[18:23]) > 1.5 * np.median(spread[np.r_[0:12, 29:40]])
+def test_run_command_bad_input(tmp_path, capsys):
+    assert main(["run", str(tmp_path / "nope"), "--out", str(tmp_path / "o")]) == 2
+    assert "not found" in capsys.readouterr().err
+    clip = tmp_path / "c"
+    clip.mkdir()
+    (clip / "clip.json").write_text('{"fps": 50, "image_size": [1920, 1080], "n_frames": 2}')
+    assert main(["run", str(clip), "--out", str(tmp_path / "o")]) == 2
+    assert "keypoints2d.json" in capsys.readouterr().err
+
+
+def test_run_refuses_a_clip_without_detections(small_clip, tmp_path, capsys):
+    clip_dir = tmp_path / "clip"
+    shutil.copytree(small_clip, clip_dir)
+    doc = json.loads((clip_dir / "keypoints2d.json").read_text())
+    for f in doc["frames"]:
+        f["keypoints"] = None
+    (clip_dir / "keypoints2d.json").write_text(json.dumps(doc))
+    assert main(["run", str(clip_dir), "--out", str(tmp_path / "o")]) == 2
+    assert "detected athlete" in capsys.readouterr().err
+
+
+def test_propagation_does_not_depend_on_the_number_of_workers(model, monkeypatch):
+    """Every draw has its own random stream: forked workers give exactly the serial result,
+    and where no process may be started the draws run in this one."""
+    import multiprocessing
+
+    m, gt = model
+    h = gt.cameras[0].C[2]
+    draws = np.column_stack([np.log(np.full(3, h)) + [0.0, 0.02, -0.02], np.full(3, gt.athlete["stature_m"]),
+                             np.ones((3, len(PARAM_NAMES) - 2))])
+    one = m.propagate(draws, np.random.default_rng(4), workers=1)
+    two = m.propagate(draws, np.random.default_rng(4), workers=2)
+    assert np.array_equal(one["joints"], two["joints"], equal_nan=True)
+    assert np.array_equal(one["joints_point"], two["joints_point"], equal_nan=True)
+    for k in one["angles"]:
+        assert np.array_equal(one["angles"][k], two["angles"][k], equal_nan=True)
+    assert one["gait"].keys() == two["gait"].keys()
+
+    class NoProcesses:
+        def Pool(self, n):
+            raise OSError("no processes here")
+
+    monkeypatch.setattr(multiprocessing, "get_context", lambda method: NoProcesses())
+    fallback = m.propagate(draws, np.random.default_rng(4), workers=2)
+    assert np.array_equal(one["joints"], fallback["joints"], equal_nan=True)
+    # the bootstrap adds noise: the noisy liftings differ from the point liftings
+    assert not np.allclose(one["joints"], one["joints_point"], equal_nan=True)
+
+
+def test_frame_status_says_how_each_camera_came_about():
+    from probreg.lanes import FrameLanes
+    from probreg.pipeline import _frame_status
+
+    ok, none = FrameLanes(status="ok"), FrameLanes(status="no_lines")
+    cam = object()
+    assert _frame_status(ok, cam, False, 0) == "ok"
+    assert _frame_status(ok, cam, False, 3) == "bridged_no_member"  # lanes, but no member at this height
+    assert _frame_status(ok, cam, True, 3) == "bridged_inconsistent"
+    assert _frame_status(none, cam, False, 2) == "bridged"
+    assert _frame_status(none, None, False, 0) == "no_lines"
+    assert _frame_status(ok, None, False, 0) == "no_member"
+    assert _frame_status(ok, None, True, 0) == "inconsistent"  # off the zoom path at the clip's end
+
+
+def test_with_a_known_lens_frames_are_judged_on_the_undistorted_families(tmp_path):
+    """A 30 deg, k1 = -0.25 lens: the straight fits to bent lines depend on which part of each
+    line a frame sees, so a full detection (every 10th frame) and the followed frames give
+    slightly different distorted families, and the bent lines' zoom path singles out a
+    correct frame.  The model judges its frames on its own, undistorted families: none is
+    singled out, every frame keeps its own camera."""
+    from probreg.bench.distortion import make_clip
+    from probreg.calibration import register_clip
+
+    clip = load_clip(make_clip("wide_k25", tmp_path / "wide", n_frames=60))
+    gt = load_groundtruth(clip.path)
+    reg = register_clip(clip)
+    assert reg.glitch_frames()  # the bent lines' families do single out frames
+    m = ClipModel(reg, clip.keypoints_px, clip.fps, clip.athlete_lane, dist=gt.cameras[0].dist)
+    assert not m.inconsistent.any() and m.valid.all()
+    h = float(gt.cameras[0].C[2])
+    f = m._focal_at(h)
+    true_f = np.array([c.focal_px for c in gt.cameras])
+    assert np.max(np.abs(f / true_f - 1)) < 0.01
+    # the undistorted families are built on forked workers; where no process may be started,
+    # in this one, with exactly the same result
+    import multiprocessing
+
+    class NoProcesses:
+        def Pool(self, n):
+            raise OSError("no processes here")
+
+    with pytest.MonkeyPatch.context() as mp:
+        mp.setattr(multiprocessing, "get_context", lambda method: NoProcesses())
+        serial = ClipModel(reg, clip.keypoints_px, clip.fps, clip.athlete_lane, dist=gt.cameras[0].dist)
+    for key in ("h", "logf", "y", "R"):
+        assert np.array_equal(getattr(m, key), getattr(serial, key), equal_nan=True)
+
+
+def test_angle_bands_scale_the_bootstrap_and_add_the_curvature_term():
+    """Known answers: a straight angle curve gets the family's scale times the bootstrap
+    deviations; a parabola with no bootstrap spread gets the curvature term alone; a number
+    for ``inflation`` gives the scaled bootstrap band without that term."""
+    from probreg.inference import BAND_CURVATURE_S2, BAND_SCALE, angle_bands
+
+    fps, F = 50.0, 100
+    t = np.arange(F) / fps
+    line = 30.0 + 10.0 * t
+    offsets = np.linspace(-1.0, 1.0, 101)[:, None]  # bootstrap draws: 5th/95th percentile -0.9/+0.9
+    point = {"knee_l": np.tile(line, (5, 1)), "trunk_lean": np.tile(line, (5, 1))}
+    noisy = {"knee_l": line + offsets, "trunk_lean": line + offsets}
+    med, lo, hi = angle_bands(point, noisy, fps=fps)["knee_l"]
+    assert np.allclose(med, line)
+    assert np.allclose(hi - med, BAND_SCALE["knee"] * 0.9) and np.allclose(med - lo, BAND_SCALE["knee"] * 0.9)
+    _, lo_t, hi_t = angle_bands(point, noisy, fps=fps)["trunk_lean"]
+    assert np.allclose(hi_t - lo_t, 2 * BAND_SCALE["trunk_lean"] * 0.9)
+    # a parabola of curvature 2000 deg/s^2, every draw alike: the band is the bias term alone
+    par = 1000.0 * (t - 1.0) ** 2
+    same = {"knee_l": np.tile(par, (5, 1))}
+    med, lo, hi = angle_bands(same, same, fps=fps)["knee_l"]
+    assert np.allclose(hi - med, BAND_CURVATURE_S2 * 2000.0) and np.allclose(med - lo, BAND_CURVATURE_S2 * 2000.0)
+    # inflation: the raw bootstrap band scaled, no curvature term (and without fps none either)
+    _, lo1, hi1 = angle_bands(same, same, fps=fps, inflation=1.0)["knee_l"]
+    assert np.allclose(lo1, par) and np.allclose(hi1, par)
+    _, lo0, hi0 = angle_bands(same, same)["knee_l"]
+    assert np.allclose(hi0, par)
+
+
+def test_gait_intervals_carry_the_step_timing_uncertainty(model):
+    """Contacts are fixed for the point liftings (every camera hypothesis scored on the same
+    steps), so their step timing is the same in every draw; the bootstrap liftings detect the
+    contacts anew on re-noised keypoints, so the reported intervals of cadence and contact
+    time are not of zero width."""
+    from probreg.inference import gait_intervals
+
+    m, gt = model
+    h = gt.cameras[0].C[2]
+    S = 12
+    draws = np.column_stack([np.log(np.full(S, h)), np.full(S, gt.athlete["stature_m"]),
+                             np.ones((S, len(PARAM_NAMES) - 2))])
+    prop = m.propagate(draws, np.random.default_rng(7), workers=1)
+    point, noisy = prop["gait_point"], prop["gait"]
+    assert point.keys() == noisy.keys()
+    assert np.ptp(point["contact_time_s"]) == 0 and np.ptp(point["cadence_spm"]) == 0
+    timing = [k for k in ("contact_time_s", "cadence_spm") if np.ptp(noisy[k][np.isfinite(noisy[k])]) > 0]
+    assert timing
+    g = gait_intervals(point, noisy, inflation=1.0)
+    for k in timing:
+        med, lo, hi = g[k]
+        assert lo < hi and lo <= med <= hi and med == np.nanmedian(point[k])
+
+
+def test_planted_feet_slide_at_wrong_camera_heights(tmp_path):
+    """A foot in early stance stands still; family members at a wrong height disagree from
+    frame to frame on where it is, so it seems to slide.  The slide changes sign at about
+    the true height, and the likelihood term built on it peaks there."""
+    from probreg.sim import config_from_preset, synthesize, write_clip
+
+    clip = synthesize(config_from_preset("run", 5, n_frames=150), seed=5, preset="run")
+    write_clip(clip, tmp_path / "c", images=True, jobs=1)
+    c = load_clip(tmp_path / "c")
+    h_true = float(load_groundtruth(tmp_path / "c").cameras[0].C[2])
+    model = ClipModel(register_clip(c), c.keypoints_px, c.fps, c.athlete_lane)
+    assert len(model._stance_windows()) >= 6
+    lg = np.log(model.grid / h_true)
+    ok = np.isfinite(model.slide_median) & (np.abs(lg) < np.log(1.25))
+    slide = model.slide_median[ok]
+    assert np.all(np.diff(slide) < 0)  # the slide falls steadily with height here
+    crossing = np.interp(0.0, -slide, lg[ok])
+    assert abs(crossing) < np.log(1.1)
+    assert np.interp(np.log(0.85), lg[ok], slide) > 0.2 and np.interp(np.log(1.15), lg[ok], slide) < -0.2
+    assert abs(lg[np.argmax(model.ll_still)]) < np.log(1.1)
