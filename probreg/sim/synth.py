@@ -449,7 +449,7 @@ def write_clip(clip: SynthClip, out_dir, images=True, jobs=None, overwrite=False
         write_json(tmp / "clip.json", {
             "fps": cfg.fps, "image_size": list(cfg.image_size), "athlete_lane": cfg.athlete_lane,
             "lane_width_m": STANDARD_TRACK.lane_width_m, "n_frames": cfg.n_frames,
-            "generator": {"name": "probreg.sim.synth", "preset": clip.preset, "seed": clip.seed,
+            "generator": {"name": "probreg.synth", "preset": clip.preset, "seed": clip.seed,
                           "style": cfg.style},
         })
         write_keypoints_json(tmp / "keypoints2d.json", clip.keypoints_px)
