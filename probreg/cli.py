@@ -2,6 +2,12 @@
 
 Commands that external benchmarks call keep their names and flags:
 ``probreg synth --out DIR [--preset NAME] [--seed N] [--frames N] [--no-images]``.
+
+Exit codes: 0 success; 2 a user error (bad input or option: one line naming the file or
+option and what was expected, no traceback); 3 the results were written but are not usable
+as they stand (``run``: the clip verdict is not ``ok``; ``calibrate``: no frame calibrated);
+130 interrupted (the previous result is left intact); 1 a bug (``--debug`` shows the
+traceback of any error).
 """
 
 from __future__ import annotations
@@ -17,6 +23,17 @@ __all__ = ["main", "build_parser"]
 
 class CliError(Exception):
     """A user-facing error: printed without a traceback, exit code 2."""
+
+
+#: exit code of a command whose results were written but are not usable as they stand
+EXIT_NOT_OK = 3
+
+
+def _prepare_out(out, inputs=(), overwrite=False):
+    """Check the output folder before any work (see :mod:`probreg.io.output`)."""
+    from .io.output import prepare_output
+
+    prepare_output(out, inputs=[p for p in inputs if p is not None], overwrite=overwrite)
 
 
 def _cmd_synth(args):
@@ -37,6 +54,7 @@ def _cmd_synth(args):
         raise CliError("--out DIR is required")
     if args.frames is not None and args.frames < 1:
         raise CliError("--frames must be at least 1")
+    _prepare_out(args.out, overwrite=args.overwrite)
     if args.suite:
         paths = write_suite(args.suite, args.out, images=not args.no_images, n_frames=args.frames,
                             jobs=args.jobs, overwrite=args.overwrite)
@@ -75,15 +93,25 @@ def _run_options(args):
                                       stature=args.stature, stature_sd=args.stature_sd)
     sampler = SamplerSettings(n_walkers=args.walkers, max_steps=args.max_steps, n_draws=args.draws,
                               seed=args.seed)
-    return RunOptions(priors=priors, sampler=sampler, dist=_parse_dist(args.dist), min_score=args.min_score)
+    return RunOptions(priors=priors, sampler=sampler, dist=_parse_dist(args.dist), min_score=args.min_score,
+                      overwrite=args.overwrite)
 
 
 def _cmd_run(args):
     from .pipeline import run_clip
 
-    run_clip(args.clip, args.out, _run_options(args))
+    res = run_clip(args.clip, args.out, _run_options(args))
     print(f"results: {args.out}")
-    return 0
+    return _verdict_exit(res)
+
+
+def _verdict_exit(res):
+    """Exit code of a run from its clip verdict (warning on stderr when not ok)."""
+    if res.verdict == "ok":
+        return 0
+    print(f"probreg: warning: verdict {res.verdict!r} ({'; '.join(res.verdict_reasons)}); the results in "
+          f"{res.out_dir} are written but should not be used as they stand (see run.json)", file=sys.stderr)
+    return EXIT_NOT_OK
 
 
 def _cmd_sensitivity(args):
@@ -102,15 +130,16 @@ def _cmd_demo(args):
     from .sim import config_from_preset, synthesize, write_clip
 
     out = Path(args.out)
-    out.mkdir(parents=True, exist_ok=True)
+    for sub in ("clip", "result"):
+        _prepare_out(out / sub, overwrite=args.overwrite)
     cfg = config_from_preset(args.preset, args.seed, n_frames=args.frames)
     clip = synthesize(cfg, seed=args.seed, preset=args.preset)
     clip_dir = write_clip(clip, out / "clip", images=True, jobs=args.jobs, overwrite=True)
     clip_report(clip_dir, out / "clip_report.html")
-    run_clip(clip_dir, out / "result", _run_options(args))
+    res = run_clip(clip_dir, out / "result", _run_options(args))
     print(f"synthetic clip: {clip_dir}\nresults and report: {out / 'result'} (report.html); "
           f"ground truth overview: {out / 'clip_report.html'}")
-    return 0
+    return _verdict_exit(res)
 
 
 def _parse_dist(text):
@@ -132,7 +161,7 @@ def _cmd_calibrate(args):
         raise CliError(f"--height-m must be positive, got {height}")
     reg = register_clip(clip, smooth=not args.no_smooth)
     cams, info = reg.cameras(height, clip.keypoints_px, clip.athlete_lane, dist=dist, branch=args.branch)
-    with atomic_output_dir(args.out, overwrite=True) as tmp:
+    with atomic_output_dir(args.out, overwrite=args.overwrite, inputs=[args.clip], log=print) as tmp:
         write_json(tmp / "lanes.json", {"image_size": list(clip.image_size),
                                        "frames": [dict(fl.to_dict(), frame=i, vp_px=fl.vp_px())
                                                   for i, fl in enumerate(reg.frame_lanes)]})
@@ -143,6 +172,12 @@ def _cmd_calibrate(args):
             "frame_status": info["frame_status"], "line_offsets": info["line_offsets"],
             "consistency_m": info["consistency_m"], "dist": dist})
     n_ok = sum(c is not None for c in cams)
+    if n_ok == 0:
+        counts = ", ".join(f"{k} {v}" for k, v in reg.status_counts().items())
+        print(f"probreg calibrate: error: calibrated 0/{clip.n_frames} frames (lane statuses: {counts}); "
+              f"no frame gave a camera at {height:g} m. Lanes, statuses and the empty camera.json "
+              f"are in {args.out}", file=sys.stderr)
+        return EXIT_NOT_OK
     print(f"calibrated {n_ok}/{clip.n_frames} frames at camera height {height:g} m "
           f"({'given' if args.height_m is not None else 'default'}); lateral spread "
           f"{info['consistency_m']:.3f} m -> {args.out}")
@@ -154,7 +189,10 @@ def _cmd_lift(args):
     from .io.results import write_angles_csv, write_joints_npz
     from .lifting import LiftConfig, lift
 
+    _prepare_out(args.out, [args.clip, args.cameras], args.overwrite)
     clip = load_clip(args.clip, min_score=args.min_score)
+    for note in clip.notes:
+        print(f"warning: {note}", file=sys.stderr)
     if clip.keypoints_px is None:
         raise CliError(f"{args.clip}: no keypoints2d.json to lift (run 'probreg detect' first)")
     cams_by_frame = read_cameras_json(args.cameras, image_size=clip.image_size)
@@ -174,7 +212,7 @@ def _cmd_lift(args):
                      smooth_cutoff_hz=None if args.no_smooth else "auto")
     res = lift(cams, clip.keypoints_px, clip.fps, segments_m=segments, config=cfg)
     ang = res.angles_deg()
-    with atomic_output_dir(args.out, overwrite=True) as tmp:
+    with atomic_output_dir(args.out, overwrite=args.overwrite, inputs=[args.clip, args.cameras], log=print) as tmp:
         write_joints_npz(tmp / "joints3d.npz", res.joints_track_m)
         write_angles_csv(tmp / "angles.csv", clip.fps, ang)
         write_json(tmp / "lift.json", {"frame_status": res.status, "segments_m": res.segments_m,
@@ -194,6 +232,7 @@ def _cmd_import(args):
     from .io.clip import atomic_output_dir, write_json, write_keypoints_json
     from .io.keypoints import read_keypoints
 
+    _prepare_out(args.out, [args.keypoints, args.video, args.frames], args.overwrite)
     kwargs = {"min_score": args.min_score}
     if args.format == "npy" or (args.format is None and str(args.keypoints).endswith((".npy", ".npz"))):
         kwargs["layout"] = args.layout
@@ -230,7 +269,9 @@ def _cmd_import(args):
     if len(kp) < n_src:
         kp = np.concatenate([kp, np.full((n_src - len(kp), 17, 3), np.nan)])
         print(f"note: keypoints cover {len(kp)} of {n_src} frames; the rest are marked missing")
-    with atomic_output_dir(args.out, overwrite=args.overwrite) as tmp:
+    with atomic_output_dir(args.out, overwrite=args.overwrite,
+                           inputs=[p for p in (args.keypoints, args.video, args.frames) if p is not None],
+                           log=print) as tmp:
         if frames is not None:
             (tmp / "frames").mkdir()
             for i, p in enumerate(frames):
@@ -317,6 +358,9 @@ def _add_run_options(p):
     g.add_argument("--draws", type=int, default=60, help="posterior draws propagated to angles")
     g.add_argument("--dist", default=None, help="known lens distortion k1,k2,p1,p2,k3 (use --dist=...)")
     g.add_argument("--min-score", type=float, default=0.3)
+    g.add_argument("--overwrite", action="store_true",
+                   help="use a non-empty --out that holds files probreg did not write: they are moved aside "
+                        "to OUT.previous-<time>, never deleted (a probreg result is replaced without it)")
     if not any(a.dest == "seed" for a in p._actions):
         g.add_argument("--seed", type=int, default=0)
 
@@ -326,6 +370,7 @@ def build_parser():
     from . import __version__
 
     p.add_argument("--version", action="version", version=f"probreg {__version__}")
+    p.add_argument("--debug", action="store_true", help="show the traceback of any error")
     sub = p.add_subparsers(dest="command", required=True)
 
     s = sub.add_parser("synth", help="generate a synthetic broadcast clip (or a fixed suite) with ground truth")
@@ -340,7 +385,8 @@ def build_parser():
     s.add_argument("--distance", type=float, default=None, help="override camera distance across the track (m)")
     s.add_argument("--fov", type=float, default=None, help="fix the horizontal field of view (deg)")
     s.add_argument("--jobs", type=int, default=None, help="rendering processes (default: all cores)")
-    s.add_argument("--overwrite", action="store_true", help="replace a non-empty output folder")
+    s.add_argument("--overwrite", action="store_true",
+                   help="use a non-empty --out that probreg did not write (moved aside, never deleted)")
     s.add_argument("--list", action="store_true", help="list presets and suites")
     s.set_defaults(func=_cmd_synth)
 
@@ -379,6 +425,7 @@ def build_parser():
                    help="which family member when a height occurs twice (default: zoomed-in)")
     c.add_argument("--no-smooth", action="store_true", help="no temporal smoothing of the vanishing point")
     c.add_argument("--min-score", type=float, default=0.3, help="keypoints below this score are missing")
+    c.add_argument("--overwrite", action="store_true", help="move a non-empty foreign --out aside (never deleted)")
     c.set_defaults(func=_cmd_calibrate)
 
     lf = sub.add_parser("lift", help="lift 2D keypoints to 3D with given per-frame cameras")
@@ -389,6 +436,7 @@ def build_parser():
                     help="JSON of segment lengths (m), e.g. groundtruth/athlete.json; estimated when absent")
     lf.add_argument("--min-score", type=float, default=0.3)
     lf.add_argument("--no-smooth", action="store_true", help="no outlier rejection / low-pass of keypoints")
+    lf.add_argument("--overwrite", action="store_true", help="move a non-empty foreign --out aside (never deleted)")
     lf.set_defaults(func=_cmd_lift)
 
     im = sub.add_parser("import", help="turn a video/frames plus existing 2D keypoints into a clip folder")
@@ -404,7 +452,8 @@ def build_parser():
     im.add_argument("--min-score", type=float, default=0.3, help="joints below this score become missing")
     im.add_argument("--trc-image-height", type=int, default=None, help="flip TRC y (Sports2D writes y up)")
     im.add_argument("--out", type=Path, required=True)
-    im.add_argument("--overwrite", action="store_true")
+    im.add_argument("--overwrite", action="store_true",
+                    help="use a non-empty --out that probreg did not write (moved aside, never deleted)")
     im.set_defaults(func=_cmd_import)
 
     de = sub.add_parser("detect", help="2D pose of the athlete in every frame with an ONNX model")
@@ -441,13 +490,15 @@ def main(argv=None):
     args = parser.parse_args(argv)
     try:
         return args.func(args)
-    except CliError as exc:
-        print(f"probreg {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except (ValueError, FileNotFoundError, FileExistsError, PermissionError, NotADirectoryError, RuntimeError) as exc:
-        print(f"probreg {args.command}: error: {exc}", file=sys.stderr)
-        return 2
-    except OSError as exc:
+    except KeyboardInterrupt:
+        print(f"probreg {args.command}: interrupted; nothing was written, and any earlier result in the "
+              f"output folder is left as it was", file=sys.stderr)
+        return 130
+    except (CliError, ValueError, OSError, RuntimeError) as exc:
+        # user-caused errors (bad input, missing files, refused output folders) are one line;
+        # ValueError/RuntimeError raised deep inside numpy or scipy would be bugs: --debug shows them
+        if args.debug:
+            raise
         print(f"probreg {args.command}: error: {exc}", file=sys.stderr)
         return 2
 

@@ -8,7 +8,14 @@ but their family leaves the clip's zoom path, so it is treated like a frame with
 ``bridged_no_member`` (lanes found, but their family has no member at the clip's camera
 height, e.g. a misdetected line; bridged likewise); ``inconsistent`` and ``no_member`` (the
 same two cases at the clip's start or end, where there is nothing to bridge from: no camera);
+``missing_image`` (the clip has no image file for this frame: no camera) and
+``bridged_missing_image`` (likewise, camera interpolated from its neighbours);
 otherwise the lane status of the frame, e.g. ``too_few_lines``, ``no_straight``).
+
+``run.json`` also holds the clip ``verdict`` (``"ok"`` or, when no frame produced an angle,
+``"uncalibrated"``) with ``verdict_reasons``, the notes about the input (``input_notes``:
+ignored files, missing images, absurd keypoints) and, when keypoints lay far outside the
+image, their count per frame (``keypoints_outside_image``).
 """
 
 from __future__ import annotations
@@ -24,7 +31,8 @@ from .calibration.registration import camera_json, register_clip
 from .geometry import JOINT_NAMES
 from .inference import ModelPriors, angle_bands, gait_intervals
 from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, SamplerSettings
-from .io.clip import ClipFormatError, atomic_output_dir, load_clip, write_json
+from .io.clip import ClipFormatError, load_clip, write_json
+from .io.output import atomic_output_dir, prepare_output
 from .io.frames import has_frames
 from .io.results import write_angles_csv, write_joints_npz
 
@@ -41,6 +49,8 @@ class RunOptions:
     min_score: float = 0.3
     branch: str = "narrow"
     report: bool = True
+    # move a non-empty output folder that holds files probreg did not write aside (never deleted)
+    overwrite: bool = False
     # None: the calibrated bands (probreg.inference.BAND_SCALE and BAND_CURVATURE_S2); a number
     # scales the bootstrap band by it, without the curvature term (1.0: raw bootstrap bands)
     band_inflation: float | None = None
@@ -56,6 +66,8 @@ class RunResult:
     gait: dict
     diagnostics: dict
     timings: dict
+    verdict: str = "ok"
+    verdict_reasons: tuple = ()
 
 
 def _arviz():
@@ -119,6 +131,8 @@ def _diagnostics(sampler, tau, idata):
 
 def _frame_status(lanes, camera, inconsistent, gap_distance):
     """The ``run.json`` status of one frame (see the module docstring)."""
+    if lanes.status == "missing_image":
+        return "missing_image" if camera is None else "bridged_missing_image"
     if camera is None:
         if not lanes.ok:
             return lanes.status
@@ -141,7 +155,10 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
         When no frame shows lanes of the straight.
     """
     t0 = time.perf_counter()
+    prepare_output(out_dir, inputs=[clip_dir], overwrite=options.overwrite)  # before any work
     clip = load_clip(clip_dir, min_score=options.min_score)
+    for note in clip.notes:
+        log(f"warning: {note}")
     if clip.keypoints_px is None:
         raise ClipFormatError(f"{clip_dir}: no keypoints2d.json (run 'probreg detect' first)")
     if not has_frames(clip):
@@ -180,7 +197,12 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
     cam_list = _as_list(cams_med)
     timings = {"total_s": time.perf_counter() - t0, "lanes_s": t1 - t0, **model.timings}
     out_dir = Path(out_dir)
-    with atomic_output_dir(out_dir, overwrite=True) as tmp:
+    n_angle = int(np.sum(np.any(np.isfinite(np.array([v[0] for v in summ.values()])), axis=0)))
+    verdict, reasons = "ok", []
+    if n_angle == 0:
+        verdict = "uncalibrated"
+        reasons.append(f"frames_with_angles 0/{clip.n_frames}")
+    with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=[clip_dir], log=log) as tmp:
         write_angles_csv(tmp / "angles.csv", clip.fps, {k: v[0] for k, v in summ.items()},
                          {k: v[1] for k, v in summ.items()}, {k: v[2] for k, v in summ.items()})
         write_joints_npz(tmp / "joints3d.npz", joints_med, samples=joints)
@@ -190,13 +212,18 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
         write_json(tmp / "gait.json", gait_s)
         status = [_frame_status(reg.frame_lanes[i], c, bool(model.inconsistent[i]), model.gap_distance[i])
                   for i, c in enumerate(cam_list)]
-        write_json(tmp / "run.json", {"diagnostics": diag, "timings_s": timings, "height_m": height,
+        extra = {} if clip.keypoints_outside is None else {
+            "keypoints_outside_image": clip.keypoints_outside.tolist()}
+        write_json(tmp / "run.json", {"verdict": verdict, "verdict_reasons": reasons,
+                                     "input_notes": list(clip.notes), **extra,
+                                     "diagnostics": diag, "timings_s": timings, "height_m": height,
                                      "frame_status": status, "noise_px": model.noise_sd,
                                      "noise_rho": model.noise_rho, "n_draws": len(draws),
                                      "priors": {"camera_height": repr(options.priors.camera_height),
                                                 "stature": repr(options.priors.stature)}})
         result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
-                           gait=gait_s, diagnostics=diag, timings=timings)
+                           gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
+                           verdict_reasons=tuple(reasons))
         if options.report:
             from .report.html import run_report
 

@@ -42,6 +42,7 @@ import numpy as np
 from .geometry import fov_from_focal
 from .io.clip import write_json
 from .lanes import line_straightness_px, undistort_frame_lanes
+from .io import atomic_output_dir
 from .pipeline import RunOptions, run_clip
 
 __all__ = ["DistortionStudy", "corner_shift_px", "distortion_study", "lane_straightness_curve", "parse_k1_list",
@@ -268,7 +269,13 @@ def distortion_study(clip_dir, out_dir, k1_values, options: RunOptions = RunOpti
     # a hypothesis within 5e-4 of the reference is the reference (no near-duplicate runs)
     ks = sorted([k for k in ks if abs(k - reference_k1) >= 5e-4] + [reference_k1])
     out_dir = Path(out_dir)
-    out_dir.mkdir(parents=True, exist_ok=True)
+    with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=[clip_dir], log=log) as tmp:
+        study = _study_into(tmp, clip_dir, ks, base, reference_k1, options, log)
+    return replace(study, out_dir=out_dir)
+
+
+def _study_into(out_dir, clip_dir, ks, base, reference_k1, options, log):
+    """Run every hypothesis into ``out_dir`` (the study's temporary folder) and write the summaries."""
     runs = {}
     for k1 in ks:
         d = base.copy()
@@ -276,7 +283,7 @@ def distortion_study(clip_dir, out_dir, k1_values, options: RunOptions = RunOpti
         sub = out_dir / f"k1_{k1:+.3f}"
         log(f"k1 = {k1:+.3f}: {sub}")
         opts = replace(options, dist=tuple(float(v) for v in d) if np.any(d) else None)
-        res = run_clip(clip_dir, sub, opts, log=log)
+        res = run_clip(clip_dir, sub, replace(opts, overwrite=False), log=log)
         straight, cams = _lane_straightness(res, d)
         runs[k1] = (res, d, straight, cams)
     ref_res = next(v for k, v in runs.items() if np.isclose(k, reference_k1))[0]
@@ -307,7 +314,7 @@ def distortion_study(clip_dir, out_dir, k1_values, options: RunOptions = RunOpti
             "height_m": dict(res.height),
             "fov_deg": float(fov_from_focal(f_med, w)),
             "frames_ok": int(cams.valid.sum()),
-            "angles": angles, "gait": gait, "result_dir": str(Path(res.out_dir)),
+            "angles": angles, "gait": gait, "result_dir": Path(res.out_dir).name,
         })
     # plumb-line curve on a fine grid, with the cameras of the run whose own hypothesis left the
     # straightest lines (its focal lengths come from lines undistorted consistently; a run that

@@ -68,7 +68,7 @@ def run(args=None):
             dt = time.perf_counter() - t0
             rows = []
             for r in study.rows:
-                s = score_result(clip, r["result_dir"])
+                s = score_result(clip, study.out_dir / r["result_dir"])
                 rows.append([f"{r['k1']:+.3f}" + (" (true)" if np.isclose(r["k1"], true[0], atol=1e-4) else ""),
                              r["corner_shift_px"], r["lane_straightness_px"], s["knee_deg"], s["mpjpe_cm"],
                              s["height_pct"], s["loc_pct"], s["fov_deg"],

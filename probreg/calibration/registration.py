@@ -477,11 +477,15 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
 
     With ``mask_athlete`` and the clip's keypoints, line evidence near the athlete is
     ignored (:func:`probreg.lanes.athlete_mask`).  Frames that cannot be read get status
-    ``bad_image``; nothing raises for bad content.
+    ``bad_image``, frames whose image file is missing ``missing_image``; nothing raises for
+    bad content.
     """
     kp = clip.keypoints_px if mask_athlete else None
-    fls = [replace(fl, image_size=clip.image_size) if fl.status == "bad_image" else fl
-           for fl in track_lanes(iter_frames(clip), config, keypoints_px=kp)]
+    missing = set(clip.missing_images)
+    fls = [replace(fl, image_size=clip.image_size,
+                   status="missing_image" if fl.frame in missing or i in missing else fl.status)
+           if fl.status == "bad_image" else fl
+           for i, fl in enumerate(track_lanes(iter_frames(clip), config, keypoints_px=kp))]
     return register_frames(fls, clip.image_size, (1.0, 0.0), clip.lane_width_m, smooth=smooth)
 
 

@@ -9,15 +9,14 @@ from __future__ import annotations
 
 import json
 import math
-import os
-import shutil
-import tempfile
+import re
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
 
 from ..geometry import JOINT_NAMES, Camera, coco_to_h36m
+from .output import atomic_output_dir
 
 __all__ = [
     "ClipFormatError",
@@ -50,12 +49,20 @@ class Clip:
     keypoints_px : ndarray, shape (F, 17, 3) or None
         H36M-17 ``(x, y, score)``; missing joints and frames without a
         detection are NaN.
-    frame_paths : list of Path
-        One image per frame (may be empty when the clip has only keypoints or a video).
+    frame_paths : list of Path or None
+        One entry per frame, matched by the number in the file name (``frames/000041.jpg`` is
+        frame 41); ``None`` where the image is missing.  Empty when the clip has only
+        keypoints or a video.
     athlete_lane : int or None
     lane_width_m : float
     meta : dict
         Everything in ``clip.json``.
+    notes : tuple of str
+        Warnings about the input that did not stop the load (stray files ignored, missing
+        images, keypoints far outside the image treated as missing).
+    keypoints_outside : ndarray of int, shape (F,) or None
+        Per frame, how many joints lay more than one image size outside the image and were
+        treated as missing.
     """
 
     path: Path
@@ -66,6 +73,8 @@ class Clip:
     athlete_lane: int | None
     lane_width_m: float
     meta: dict
+    notes: tuple = ()
+    keypoints_outside: np.ndarray | None = None
 
     @property
     def n_frames(self):
@@ -79,6 +88,11 @@ class Clip:
     def video_path(self):
         p = self.path / "video.mp4"
         return p if p.exists() else None
+
+    @property
+    def missing_images(self):
+        """Frames of an image-folder clip whose image file is missing."""
+        return [i for i, p in enumerate(self.frame_paths) if p is None]
 
     def times_s(self):
         return np.arange(self.n_frames) / self.fps
@@ -143,7 +157,8 @@ def read_keypoints_json(path, n_frames=None):
     Raises
     ------
     ClipFormatError
-        On malformed JSON, an unknown format, wrong joint counts or bad frame indices.
+        On malformed JSON, an unknown format, wrong joint counts, bad frame indices, or
+        scores outside [0, 1].
     """
     path = Path(path)
     doc = _read_json(path)
@@ -184,6 +199,14 @@ def read_keypoints_json(path, n_frames=None):
         if arr.shape[1] == 2:
             arr = np.concatenate([arr, np.ones((17, 1))], axis=1)
         out[fi] = arr
+    scores = out[..., 2]
+    with np.errstate(invalid="ignore"):
+        bad_score = np.isfinite(scores) & ((scores < 0) | (scores > 1 + 1e-6))
+    if np.any(bad_score):
+        fi, ji = np.argwhere(bad_score)[0]
+        raise ClipFormatError(f"{path}: frame {fi}, joint {ji}: score {scores[fi, ji]:g} outside [0, 1] "
+                              f"({int(bad_score.sum())} scores out of range); scores are detector "
+                              f"confidences from 0 to 1: rescale them (e.g. divide 0-100 scores by 100)")
     if fmt == "coco17":
         out = coco_to_h36m(out)
     # a joint with any NaN coordinate is missing as a whole
@@ -205,8 +228,78 @@ def write_keypoints_json(path, keypoints_px, fmt="h36m17"):
     write_json(path, {"format": fmt, "joint_names": list(JOINT_NAMES), "frames": frames})
 
 
+#: frame rates a clip may have (frames per second)
+FPS_RANGE = (1.0, 1000.0)
+#: image file endings read as frames
+IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
+_FRAME_NAME = re.compile(r"\d+")
+
+
+def _index_frames(frame_dir: Path):
+    """``{frame number: path}`` of ``frames/`` by the number in each file name, and notes.
+
+    Raises
+    ------
+    ClipFormatError
+        If two files carry the same frame number.
+    """
+    found, ignored = {}, []
+    for p in sorted(frame_dir.iterdir()):
+        if not (p.is_file() and p.suffix.lower() in IMAGE_SUFFIXES and _FRAME_NAME.fullmatch(p.stem)):
+            if not p.name.startswith("."):
+                ignored.append(p.name)
+            continue
+        k = int(p.stem)
+        if k in found:
+            raise ClipFormatError(f"{found[k]} and {p}: both are frame {k}; keep one of them")
+        found[k] = p
+    notes = []
+    if ignored:
+        notes.append(f"{frame_dir}: ignored {len(ignored)} file(s) that are not frames "
+                     f"(name must be the frame number, e.g. 000041.jpg): {', '.join(ignored[:5])}"
+                     + (" ..." if len(ignored) > 5 else ""))
+    return found, notes
+
+
+def _check_number(meta, key, path, lo, hi, what):
+    v = meta.get(key)
+    if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi:
+        raise ClipFormatError(f"{path}: '{key}' must be {what} between {lo:g} and {hi:g}, got {v!r}")
+    return v
+
+
+def _actual_image_size(path: Path, frame_paths, video):
+    """(W, H) of the first readable frame, or None."""
+    import cv2
+
+    if video is not None:
+        cap = cv2.VideoCapture(str(video))
+        try:
+            if cap.isOpened():
+                w, h = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
+                return ((w, h), video) if w > 0 and h > 0 else None
+        finally:
+            cap.release()
+        return None
+    for p in frame_paths:
+        if p is None:
+            continue
+        img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
+        if img is not None:
+            return (img.shape[1], img.shape[0]), p
+        return None
+    return None
+
+
 def load_clip(path, min_score=0.0):
-    """Load a clip folder.
+    """Load a clip folder and check it against ``CLIP_FORMAT.md``.
+
+    Frames are matched to keypoints by the number in the image's file name, never by their
+    position in a listing: a missing image leaves its frame without an image (status
+    ``missing_image`` downstream), a file that is not named by a frame number is ignored with
+    a note, and two files with one number are an error.  Keypoints more than one image size
+    outside the image (absurd coordinates) are treated as missing, with a note and a count
+    per frame (:attr:`Clip.keypoints_outside`).
 
     Parameters
     ----------
@@ -217,35 +310,76 @@ def load_clip(path, min_score=0.0):
     Raises
     ------
     ClipFormatError
-        If the folder, ``clip.json`` or ``keypoints2d.json`` is missing or malformed.
+        If the folder, ``clip.json`` or ``keypoints2d.json`` is missing or malformed; if
+        ``fps`` is not within :data:`FPS_RANGE`; if ``image_size`` disagrees with the frames;
+        if keypoint scores lie outside [0, 1]; if two images carry one frame number.
     """
     path = Path(path)
     if not path.is_dir():
         raise ClipFormatError(f"{path}: clip folder not found")
-    meta = _read_json(path / "clip.json")
+    cj = path / "clip.json"
+    meta = _read_json(cj)
     if not isinstance(meta, dict):
-        raise ClipFormatError(f"{path / 'clip.json'}: expected a JSON object")
-    try:
-        fps = float(meta["fps"])
-        w, h = (int(v) for v in meta["image_size"])
-    except (KeyError, TypeError, ValueError):
-        raise ClipFormatError(f"{path / 'clip.json'}: needs 'fps' and 'image_size': [W, H]") from None
-    if not (fps > 0 and w > 0 and h > 0):
-        raise ClipFormatError(f"{path / 'clip.json'}: fps and image size must be positive")
+        raise ClipFormatError(f"{cj}: expected a JSON object")
+    if "fps" not in meta or "image_size" not in meta:
+        raise ClipFormatError(f"{cj}: needs 'fps' and 'image_size': [W, H]")
+    fps = float(_check_number(meta, "fps", cj, *FPS_RANGE, "a frame rate (frames per second)"))
+    size = meta["image_size"]
+    if (not isinstance(size, list) or len(size) != 2
+            or not all(isinstance(v, int) and not isinstance(v, bool) and 1 <= v <= 100_000 for v in size)):
+        raise ClipFormatError(f"{cj}: 'image_size' must be [width, height] in whole pixels, got {size!r}")
+    w, h = size
     lane = meta.get("athlete_lane")
     if lane is not None and (not isinstance(lane, int) or not 1 <= lane <= 9):
-        raise ClipFormatError(f"{path / 'clip.json'}: athlete_lane must be a lane number 1..9")
+        raise ClipFormatError(f"{cj}: athlete_lane must be a lane number 1..9")
+    if meta.get("n_frames") is not None:
+        _check_number(meta, "n_frames", cj, 1, 10_000_000, "a whole number of frames")
+        if meta["n_frames"] != int(meta["n_frames"]):
+            raise ClipFormatError(f"{cj}: 'n_frames' must be a whole number, got {meta['n_frames']!r}")
+    notes = []
     frame_dir = path / "frames"
-    frame_paths = sorted(p for p in frame_dir.glob("*") if p.suffix.lower() in (".jpg", ".jpeg", ".png")) \
-        if frame_dir.is_dir() else []
-    n = meta.get("n_frames") or (len(frame_paths) or None)
+    found = {}
+    if frame_dir.is_dir():
+        found, notes_f = _index_frames(frame_dir)
+        notes += notes_f
+    n_meta = int(meta["n_frames"]) if meta.get("n_frames") is not None else None
+    n = n_meta or ((max(found) + 1) if found else None)
+    if n_meta is not None and found and max(found) >= n_meta:
+        beyond = sorted(k for k in found if k >= n_meta)
+        notes.append(f"{frame_dir}: {len(beyond)} image(s) beyond the clip's {n_meta} frames ignored "
+                     f"(first: {found[beyond[0]].name})")
     kp = None
+    outside = None
     if (path / "keypoints2d.json").exists():
         kp = read_keypoints_json(path / "keypoints2d.json", n_frames=n)
+        # absurd coordinates (far outside the image) are not detections: treat them as missing
+        x, y = kp[..., 0], kp[..., 1]
+        with np.errstate(invalid="ignore"):
+            far = (x < -w) | (x > 2 * w) | (y < -h) | (y > 2 * h)
+        if np.any(far):
+            outside = far.sum(axis=1).astype(int)
+            fi, ji = np.argwhere(far)[0]
+            notes.append(f"{path / 'keypoints2d.json'}: {int(far.sum())} joint(s) in {int(np.sum(outside > 0))} "
+                         f"frame(s) lie more than one image size outside the {w}x{h} image (first: frame "
+                         f"{fi}, {JOINT_NAMES[ji]} at ({x[fi, ji]:.4g}, {y[fi, ji]:.4g})); treated as missing")
+            kp[far] = np.nan
         if min_score > 0:
             kp[kp[..., 2] < min_score] = np.nan
+        n = len(kp)
+    frame_paths = [found.get(i) for i in range(n)] if found and n else []
+    missing = [i for i, p in enumerate(frame_paths) if p is None]
+    if missing:
+        notes.append(f"{frame_dir}: no image for {len(missing)} of {n} frames (first: frame {missing[0]}); "
+                     f"their status is missing_image")
+    video = path / "video.mp4"
+    actual = _actual_image_size(path, frame_paths, video if (not frame_paths and video.exists()) else None)
+    if actual is not None and tuple(actual[0]) != (w, h):
+        (aw, ah), src = actual
+        raise ClipFormatError(f"{cj}: 'image_size' is [{w}, {h}] but {src} is {aw}x{ah} pixels "
+                              f"(expected [width, height] of the frames)")
     return Clip(path=path, fps=fps, image_size=(w, h), keypoints_px=kp, frame_paths=frame_paths,
-                athlete_lane=lane, lane_width_m=float(meta.get("lane_width_m", 1.22)), meta=meta)
+                athlete_lane=lane, lane_width_m=float(meta.get("lane_width_m", 1.22)), meta=meta,
+                notes=tuple(notes), keypoints_outside=outside)
 
 
 def read_cameras_json(path, image_size=(1920, 1080)):
@@ -290,58 +424,3 @@ def load_groundtruth(path):
         raise ClipFormatError(f"{exc.filename}: file not found") from None
     return GroundTruth(cameras=[cams[i] for i in sorted(cams)], joints3d_track_m=j3,
                        joints2d_px=j2, contacts=contacts, athlete=_read_json(gt / "athlete.json"))
-
-
-class atomic_output_dir:
-    """Context manager: build an output folder under a temporary name, rename on success.
-
-    A failure leaves no folder that looks complete.  An existing target is
-    replaced only when it is empty, was written by probreg (has ``clip.json``
-    or ``.probreg``), or ``overwrite`` is set.
-
-    Raises
-    ------
-    FileExistsError
-        If the target holds foreign files and ``overwrite`` is not set.
-    PermissionError, OSError
-        If the parent folder cannot be written.
-    """
-
-    def __init__(self, target, overwrite=False):
-        self.target = Path(target)
-        self.overwrite = overwrite
-        self.tmp = None
-
-    def __enter__(self):
-        t = self.target
-        if t.exists():
-            if not t.is_dir():
-                raise FileExistsError(f"{t}: exists and is not a folder")
-            ours = (t / "clip.json").exists() or (t / ".probreg").exists()
-            if any(t.iterdir()) and not (ours or self.overwrite):
-                raise FileExistsError(f"{t}: folder is not empty and was not written by probreg "
-                                      f"(use --overwrite to replace it)")
-        parent = t.parent if str(t.parent) else Path(".")
-        parent.mkdir(parents=True, exist_ok=True)
-        if not os.access(parent, os.W_OK):
-            raise PermissionError(f"{parent}: output folder is not writable")
-        try:
-            self.tmp = Path(tempfile.mkdtemp(prefix=f".{t.name}.tmp-", dir=parent))
-        except OSError as exc:
-            raise PermissionError(f"{parent}: cannot create the output folder there ({exc.strerror})") from None
-        os.chmod(self.tmp, 0o755)
-        return self.tmp
-
-    def __exit__(self, exc_type, exc, tb):
-        if exc_type is not None:
-            shutil.rmtree(self.tmp, ignore_errors=True)
-            return False
-        (self.tmp / ".probreg").write_text("written by probreg\n")
-        if self.target.exists():
-            old = self.target.with_name(self.target.name + ".old-" + self.tmp.name[-8:])
-            os.replace(self.target, old)
-            os.replace(self.tmp, self.target)
-            shutil.rmtree(old, ignore_errors=True)
-        else:
-            os.replace(self.tmp, self.target)
-        return False

@@ -12,14 +12,19 @@ __all__ = ["iter_frames", "read_frame", "has_frames"]
 
 
 def has_frames(clip: Clip):
-    return bool(clip.frame_paths) or clip.video_path is not None
+    """Whether the clip has at least one image (frames/ folder) or a video."""
+    return any(p is not None for p in clip.frame_paths) or clip.video_path is not None
+
+
+def _imread(path):
+    return None if path is None else cv2.imread(str(path), cv2.IMREAD_COLOR)
 
 
 def read_frame(clip: Clip, index):
     """One frame (BGR uint8) or ``None`` when it is missing or unreadable."""
     if clip.frame_paths:
         if 0 <= index < len(clip.frame_paths):
-            return cv2.imread(str(clip.frame_paths[index]), cv2.IMREAD_COLOR)
+            return _imread(clip.frame_paths[index])
         return None
     if clip.video_path is not None:
         cap = cv2.VideoCapture(str(clip.video_path))
@@ -33,7 +38,7 @@ def read_frame(clip: Clip, index):
 
 
 def iter_frames(clip: Clip, n_frames=None):
-    """Yield ``(index, image or None)`` for every frame of the clip.
+    """Yield ``(index, image or None)`` for every frame of the clip (``None``: missing or unreadable).
 
     Raises
     ------
@@ -43,8 +48,7 @@ def iter_frames(clip: Clip, n_frames=None):
     n = clip.n_frames if n_frames is None else n_frames
     if clip.frame_paths:
         for i in range(n):
-            img = cv2.imread(str(clip.frame_paths[i]), cv2.IMREAD_COLOR) if i < len(clip.frame_paths) else None
-            yield i, img
+            yield i, (_imread(clip.frame_paths[i]) if i < len(clip.frame_paths) else None)
         return
     if clip.video_path is None:
         raise ClipFormatError(f"{Path(clip.path)}: no frames/ folder and no video.mp4")

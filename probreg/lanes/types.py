@@ -12,6 +12,8 @@ Per-frame statuses (never exceptions):
     no line evidence at all.
 ``bad_image``
     the frame could not be read or is empty.
+``missing_image``
+    the clip has no image file for this frame.
 """
 
 from __future__ import annotations
@@ -23,7 +25,7 @@ import numpy as np
 __all__ = ["LaneDetectorConfig", "LaneLine", "FrameLanes", "STATUSES"]
 
 
-STATUSES = ("ok", "too_few_lines", "no_straight", "no_lines", "bad_image")
+STATUSES = ("ok", "too_few_lines", "no_straight", "no_lines", "bad_image", "missing_image")
 
 @dataclass(frozen=True)
 class LaneDetectorConfig:

@@ -22,6 +22,7 @@ def _clip(tmp_path, keypoints=None, meta=None):
 
 def test_round_trip_with_missing_frames_and_joints(tmp_path, rng):
     kp = rng.uniform(0, 1000, (4, 17, 3))
+    kp[..., 2] = rng.uniform(0, 1, (4, 17))  # scores are confidences in [0, 1]
     kp[1] = np.nan
     kp[2, 5] = np.nan
     write_keypoints_json(tmp_path / "k.json", kp)

@@ -1,0 +1,340 @@
+"""Bad and unusual input: one test per case of issue 26, plus the cases that already behaved well.
+
+Every user-caused error ends with one line naming the file or option (exit 2, no traceback);
+results that are written but unusable exit 3; probreg never deletes what it did not write.
+"""
+
+import json
+import os
+import shutil
+
+import cv2
+import numpy as np
+import pytest
+
+from probreg.cli import main
+from probreg.io import ClipFormatError, load_clip
+
+def _output():
+    from probreg.io import output
+
+    return output
+
+
+FAST_RUN = ["--walkers", "20", "--max-steps", "300", "--draws", "8", "--seed", "1"]
+
+
+@pytest.fixture
+def clip(small_clip, tmp_path):
+    """A private copy of the session's small synthetic clip (40 frames with images)."""
+    d = tmp_path / "clip"
+    shutil.copytree(small_clip, d)
+    return d
+
+
+def _one_error_line(capsys, *needles):
+    err = capsys.readouterr().err
+    assert "Traceback" not in err
+    lines = [ln for ln in err.splitlines() if ln.startswith("probreg")]
+    assert len(lines) == 1, err
+    for n in needles:
+        assert n in lines[0], lines[0]
+    return lines[0]
+
+
+def _tree(folder):
+    return {p.relative_to(folder).as_posix(): p.read_bytes() for p in sorted(folder.rglob("*")) if p.is_file()}
+
+
+# ----------------------------------------------------------------------------- 1. data loss via --out
+def test_run_refuses_out_equal_to_or_inside_the_input_and_leaves_it_intact(clip, capsys):
+    before = _tree(clip)
+    assert main(["run", str(clip), "--out", str(clip)] + FAST_RUN) == 2
+    _one_error_line(capsys, str(clip), "input")
+    assert main(["run", str(clip), "--out", str(clip / "result")] + FAST_RUN) == 2
+    _one_error_line(capsys, "input")
+    assert main(["run", str(clip), "--out", str(clip.parent)] + FAST_RUN) == 2  # would contain the input
+    _one_error_line(capsys, "input")
+    assert _tree(clip) == before
+
+
+@pytest.mark.parametrize("command", ["run", "calibrate", "lift"])
+def test_out_with_foreign_files_is_refused_before_any_work(clip, tmp_path, capsys, command):
+    out = tmp_path / "thesis"
+    out.mkdir()
+    (out / "notes.txt").write_text("three months of notes")
+    extra = ["--cameras", str(clip / "groundtruth" / "cameras.json")] if command == "lift" else []
+    assert main([command, str(clip), "--out", str(out)] + extra) == 2
+    _one_error_line(capsys, str(out), "not written by probreg", "--overwrite")
+    assert (out / "notes.txt").read_text() == "three months of notes"
+    assert sorted(p.name for p in out.iterdir()) == ["notes.txt"]
+
+
+def test_overwrite_moves_foreign_files_aside_never_deletes(tmp_path):
+    OutputRefused, atomic_output_dir, prepare_output = _output().OutputRefused, _output().atomic_output_dir, _output().prepare_output
+    out = tmp_path / "out"
+    out.mkdir()
+    (out / "notes.txt").write_text("keep me")
+    with pytest.raises(OutputRefused, match="not written by probreg"):
+        prepare_output(out)
+    notes = []
+    with atomic_output_dir(out, overwrite=True, log=notes.append) as tmp:
+        (tmp / "angles.csv").write_text("new")
+    assert (out / "angles.csv").read_text() == "new"
+    aside = [p for p in tmp_path.iterdir() if p.name.startswith("out.previous-")]
+    assert len(aside) == 1 and (aside[0] / "notes.txt").read_text() == "keep me"
+    assert notes and str(aside[0]) in notes[0]
+
+
+def test_a_probreg_result_is_replaced_but_not_when_a_user_added_files(tmp_path):
+    MARKER, OutputRefused, atomic_output_dir = _output().MARKER, _output().OutputRefused, _output().atomic_output_dir
+    out = tmp_path / "res"
+    with atomic_output_dir(out) as tmp:
+        (tmp / "angles.csv").write_text("first")
+        (tmp / "sub").mkdir()
+        (tmp / "sub" / "a.txt").write_text("x")
+    marker = json.loads((out / MARKER).read_text())
+    assert marker["written_by"] == "probreg" and "angles.csv" in marker["files"] and "sub/a.txt" in marker["files"]
+    with atomic_output_dir(out) as tmp:  # a re-run replaces our own result
+        (tmp / "angles.csv").write_text("second")
+    assert (out / "angles.csv").read_text() == "second" and not (out / "sub").exists()
+    (out / "my_analysis.ipynb").write_text("user's work")
+    with pytest.raises(OutputRefused, match="my_analysis.ipynb"):
+        with atomic_output_dir(out) as tmp:
+            pass
+    assert (out / "my_analysis.ipynb").read_text() == "user's work"
+    assert [p.name for p in tmp_path.iterdir()] == ["res"]  # no temporaries left behind
+
+
+def test_a_clip_folder_with_a_clip_json_is_not_taken_for_a_result(tmp_path):
+    """Before: ``clip.json`` made any folder 'ours', so `--out` onto a user's clip deleted it."""
+    OutputRefused, prepare_output = _output().OutputRefused, _output().prepare_output
+    user_clip = tmp_path / "myclip"
+    (user_clip / "frames").mkdir(parents=True)
+    (user_clip / "clip.json").write_text('{"fps": 50, "image_size": [64, 48]}')
+    (user_clip / "frames" / "000000.jpg").write_bytes(b"jpeg")
+    with pytest.raises(OutputRefused):
+        prepare_output(user_clip)
+    assert (user_clip / "frames" / "000000.jpg").exists()
+
+
+# ----------------------------------------------------------------------------- 2. frames by number
+def test_frames_are_matched_by_number_not_by_listing_position(clip):
+    (clip / "frames" / "000005.jpg").unlink()
+    shutil.copy(clip / "frames" / "000007.jpg", clip / "frames" / "thumbs.jpg")
+    shutil.copy(clip / "frames" / "000007.jpg", clip / "frames" / "000041 (1).jpg")
+    c = load_clip(clip)
+    assert c.n_frames == 40 and c.frame_paths[5] is None and c.missing_images == [5]
+    assert all(c.frame_paths[i].name == f"{i:06d}.jpg" for i in range(40) if i != 5)
+    notes = " ".join(c.notes)
+    assert "thumbs.jpg" in notes and "000041 (1).jpg" in notes and "missing_image" in notes
+
+    from probreg.calibration import register_clip
+
+    reg = register_clip(c)
+    assert reg.frame_lanes[5].status == "missing_image"
+    assert reg.frame_lanes[6].status == "ok" and reg.frame_lanes[39].status == "ok"
+
+
+def test_two_images_with_one_frame_number_are_an_error_naming_both(clip, tmp_path, capsys):
+    shutil.copy(clip / "frames" / "000003.jpg", clip / "frames" / "3.png")
+    with pytest.raises(ClipFormatError, match=r"000003\.jpg and .*3\.png: both are frame 3"):
+        load_clip(clip)
+    assert main(["run", str(clip), "--out", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, "both are frame 3")
+
+
+# ----------------------------------------------------------------------------- 3. scores out of range
+def test_scores_out_of_range_are_a_clear_error(clip, tmp_path, capsys):
+    doc = json.loads((clip / "keypoints2d.json").read_text())
+    for f in doc["frames"]:
+        if f["keypoints"]:
+            for kp in f["keypoints"]:
+                if kp[2] is not None:
+                    kp[2] *= 100  # a detector that reports 0-100
+    (clip / "keypoints2d.json").write_text(json.dumps(doc))
+    with pytest.raises(ClipFormatError, match=r"outside \[0, 1\]"):
+        load_clip(clip)
+    assert main(["run", str(clip), "--out", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, "keypoints2d.json", "score", "[0, 1]")
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_result_without_any_angle_is_a_failure_not_a_success(clip, tmp_path, capsys, monkeypatch):
+    """Whatever the cause, a run in which no frame produced an angle says so: verdict
+    ``uncalibrated``, exit 3, and the result is still written for inspection."""
+    import probreg.pipeline as pipeline
+
+    real = pipeline.angle_bands
+
+    def all_nan(*a, **k):
+        return {name: tuple(np.full_like(v, np.nan) for v in bands) for name, bands in real(*a, **k).items()}
+
+    monkeypatch.setattr(pipeline, "angle_bands", all_nan)
+    out = tmp_path / "o"
+    assert main(["run", str(clip), "--out", str(out), "--dist=-0.1,0,0,0,0"] + FAST_RUN) == 3
+    err = capsys.readouterr().err
+    assert "uncalibrated" in err and "frames_with_angles 0/40" in err and "Traceback" not in err
+    run = json.loads((out / "run.json").read_text())
+    assert run["verdict"] == "uncalibrated" and run["verdict_reasons"] == ["frames_with_angles 0/40"]
+
+
+# ----------------------------------------------------------------------------- 4. absurd coordinates
+def test_keypoints_far_outside_the_image_are_missing_with_a_count(clip):
+    doc = json.loads((clip / "keypoints2d.json").read_text())
+    doc["frames"][3]["keypoints"][2][0] = 1e10
+    doc["frames"][9]["keypoints"][5][0] = -40000.0
+    doc["frames"][9]["keypoints"][6][1] = 5000.0  # 1080-high image: beyond 2 x 1080
+    (clip / "keypoints2d.json").write_text(json.dumps(doc))
+    c = load_clip(clip)
+    assert np.all(np.isnan(c.keypoints_px[3, 2])) and np.all(np.isnan(c.keypoints_px[9, [5, 6]]))
+    assert c.keypoints_outside[3] == 1 and c.keypoints_outside[9] == 2 and c.keypoints_outside.sum() == 3
+    assert np.isfinite(c.keypoints_px[3, 0, 0])  # the rest of the frame stays
+    assert any("more than one image size outside" in n for n in c.notes)
+
+
+def test_run_end_to_end_with_missing_image_stray_file_and_absurd_keypoint(clip, tmp_path, capsys):
+    """The earlier traceback in the report (x = 1e10) and the silent frame shift (missing image)
+    in one run: it completes, and run.json says what happened per frame."""
+    (clip / "frames" / "000020.jpg").unlink()
+    shutil.copy(clip / "frames" / "000007.jpg", clip / "frames" / "Thumbs.jpg")
+    doc = json.loads((clip / "keypoints2d.json").read_text())
+    doc["frames"][12]["keypoints"][2][0] = 1e10
+    (clip / "keypoints2d.json").write_text(json.dumps(doc))
+    out = tmp_path / "res ü"  # a space and a non-ASCII name on the way
+    assert main(["run", str(clip), "--out", str(out), "--dist=-0.1,0,0,0,0"] + FAST_RUN) == 0
+    err = capsys.readouterr()
+    assert "Traceback" not in err.err
+    run = json.loads((out / "run.json").read_text())
+    assert run["frame_status"][20] in ("missing_image", "bridged_missing_image")
+    assert run["frame_status"][19] == "ok" and run["frame_status"][21] == "ok"
+    assert run["keypoints_outside_image"][12] == 1 and sum(run["keypoints_outside_image"]) == 1
+    assert any("Thumbs.jpg" in n for n in run["input_notes"])
+    assert (out / "report.html").exists() and (out / "angles.csv").exists()
+
+
+# ----------------------------------------------------------------------------- 5. metadata
+@pytest.mark.parametrize("fps", ["Infinity", "1e-9", "-50", "\"fifty\"", "true"])
+def test_fps_outside_the_accepted_range_is_a_clear_error(clip, tmp_path, capsys, fps):
+    meta = (clip / "clip.json").read_text()
+    doc = json.loads(meta)
+    (clip / "clip.json").write_text(json.dumps(doc).replace(f'"fps": {json.dumps(doc["fps"])}', f'"fps": {fps}'))
+    assert main(["run", str(clip), "--out", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, "clip.json", "'fps'", "between 1 and 1000")
+
+
+def test_wrong_or_swapped_image_size_is_found(clip, tmp_path, capsys):
+    doc = json.loads((clip / "clip.json").read_text())
+    doc["image_size"] = doc["image_size"][::-1]
+    (clip / "clip.json").write_text(json.dumps(doc))
+    with pytest.raises(ClipFormatError, match=r"'image_size' is \[1080, 1920\] but .*000000.jpg is 1920x1080"):
+        load_clip(clip)
+    assert main(["calibrate", str(clip), "--out", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, "image_size")
+
+
+def test_calibrate_with_no_frame_calibrated_is_a_failure(clip, tmp_path, capsys):
+    blank = np.full((1080, 1920, 3), 90, np.uint8)
+    for p in (clip / "frames").glob("*.jpg"):
+        cv2.imwrite(str(p), blank)
+    out = tmp_path / "cal"
+    assert main(["calibrate", str(clip), "--out", str(out)]) == 3
+    err = capsys.readouterr().err
+    assert "calibrated 0/40 frames" in err and "Traceback" not in err
+    assert (out / "calibration.json").exists()  # written for inspection
+
+
+# ----------------------------------------------------------------------------- 6. late checks, leftovers, interrupts
+def test_out_that_is_a_file_is_refused_before_the_work(clip, tmp_path, capsys, monkeypatch):
+    import probreg.pipeline as pipeline
+
+    def never(*a, **k):
+        raise AssertionError("the work started before the output was checked")
+
+    monkeypatch.setattr(pipeline, "register_clip", never)
+    f = tmp_path / "result.txt"
+    f.write_text("x")
+    assert main(["run", str(clip), "--out", str(f)]) == 2
+    _one_error_line(capsys, "not a folder")
+    assert main(["run", str(clip), "--out", str(f / "sub")]) == 2
+    _one_error_line(capsys, "not a folder")
+    assert f.read_text() == "x"
+
+
+@pytest.mark.skipif(hasattr(os, "geteuid") and os.geteuid() == 0, reason="root may write into read-only folders")
+def test_out_in_a_read_only_folder_is_refused_before_the_work(clip, tmp_path, capsys):
+    ro = tmp_path / "ro"
+    ro.mkdir()
+    ro.chmod(0o555)
+    try:
+        assert main(["run", str(clip), "--out", str(ro / "res")]) == 2
+        _one_error_line(capsys, "not writable")
+    finally:
+        ro.chmod(0o755)
+
+
+def test_stale_temporaries_of_a_dead_run_are_removed_on_the_next_start(tmp_path):
+    prepare_output = _output().prepare_output
+    dead = tmp_path / ".res.tmp-999999999-abc"  # no such process
+    dead.mkdir()
+    (dead / ".probreg-incomplete").write_text("999999999\n")
+    (dead / "angles.csv").write_text("half")
+    alive = tmp_path / f".res.tmp-{os.getpid()}-def"  # a run still going on (this process)
+    alive.mkdir()
+    (alive / ".probreg-incomplete").write_text(f"{os.getpid()}\n")
+    foreign = tmp_path / ".res.tmp-1-xyz"  # not ours: no marker
+    foreign.mkdir()
+    prepare_output(tmp_path / "res")
+    assert not dead.exists() and alive.exists() and foreign.exists()
+
+
+def test_an_interrupted_run_leaves_the_previous_result_intact(clip, tmp_path, capsys, monkeypatch):
+    atomic_output_dir = _output().atomic_output_dir
+    out = tmp_path / "res"
+    with atomic_output_dir(out) as tmp:
+        (tmp / "angles.csv").write_text("previous result")
+    import probreg.pipeline as pipeline
+
+    def ctrl_c(*a, **k):
+        raise KeyboardInterrupt
+
+    monkeypatch.setattr(pipeline.ClipModel, "sample", ctrl_c)
+    assert main(["run", str(clip), "--out", str(out)] + FAST_RUN) == 130
+    err = capsys.readouterr().err
+    assert "interrupted" in err and "left as it was" in err
+    assert (out / "angles.csv").read_text() == "previous result"
+    assert [p.name for p in tmp_path.iterdir() if p.name.startswith(".res")] == []
+
+
+def test_a_failure_inside_the_writer_leaves_the_previous_result(tmp_path):
+    atomic_output_dir = _output().atomic_output_dir
+    out = tmp_path / "res"
+    with atomic_output_dir(out) as tmp:
+        (tmp / "angles.csv").write_text("previous")
+    with pytest.raises(RuntimeError):
+        with atomic_output_dir(out) as tmp:
+            (tmp / "angles.csv").write_text("half")
+            raise RuntimeError("disk full")
+    assert (out / "angles.csv").read_text() == "previous"
+
+
+# ----------------------------------------------------------------------------- already good, kept so
+@pytest.mark.parametrize("content, needle", [("{not json", "malformed JSON"), ("[]", "JSON object"),
+                                             ('{"fps": 50}', "image_size")])
+def test_malformed_clip_json_names_the_file(clip, tmp_path, capsys, content, needle):
+    (clip / "clip.json").write_text(content)
+    assert main(["run", str(clip), "--out", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, "clip.json", needle)
+
+
+def test_missing_clip_and_missing_keypoints(clip, tmp_path, capsys):
+    assert main(["run", str(tmp_path / "nope"), "--out", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, "not found")
+    (clip / "keypoints2d.json").unlink()
+    assert main(["run", str(clip), "--out", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, "keypoints2d.json")
+
+
+def test_debug_shows_the_traceback(tmp_path):
+    with pytest.raises(ClipFormatError):
+        main(["--debug", "run", str(tmp_path / "nope"), "--out", str(tmp_path / "o")])
