@@ -94,7 +94,7 @@ def _run_options(args):
     sampler = SamplerSettings(n_walkers=args.walkers, max_steps=args.max_steps, n_draws=args.draws,
                               seed=args.seed)
     return RunOptions(priors=priors, sampler=sampler, dist=_parse_dist(args.dist), min_score=args.min_score,
-                      overwrite=args.overwrite)
+                      overwrite=args.overwrite, camera_side=args.camera_side)
 
 
 def _cmd_run(args):
@@ -160,6 +160,14 @@ def _cmd_calibrate(args):
     if not (height > 0):
         raise CliError(f"--height-m must be positive, got {height}")
     reg = register_clip(clip, smooth=not args.no_smooth)
+    side = None
+    if clip.keypoints_px is not None:
+        given = args.camera_side if args.camera_side != "auto" else clip.meta.get("camera_side", "auto")
+        if given not in ("auto", "main", "far"):
+            raise CliError(f"{args.clip}/clip.json: 'camera_side' must be auto, main or far, got {given!r}")
+        side = reg.orient(height, clip.keypoints_px, args.branch, fps=clip.fps, given=given)
+    elif args.camera_side != "auto":
+        reg.set_camera_side(args.camera_side)
     cams, info = reg.cameras(height, clip.keypoints_px, clip.athlete_lane, dist=dist, branch=args.branch)
     with atomic_output_dir(args.out, overwrite=args.overwrite, inputs=[args.clip], log=print) as tmp:
         write_json(tmp / "lanes.json", {"image_size": list(clip.image_size),
@@ -170,7 +178,10 @@ def _cmd_calibrate(args):
             "height_m": height, "height_source": "given" if args.height_m is not None else "default",
             "branch": args.branch, "forward_px": reg.forward_px, "status_counts": reg.status_counts(),
             "frame_status": info["frame_status"], "line_offsets": info["line_offsets"],
-            "consistency_m": info["consistency_m"], "dist": dist})
+            "consistency_m": info["consistency_m"], "dist": dist,
+            "camera_side": side.to_dict() if side is not None else
+            {"chosen": "main" if reg.forward_px[0] > 0 else "far", "source": "given" if args.camera_side != "auto"
+             else "default (no keypoints to decide by)"}})
     n_ok = sum(c is not None for c in cams)
     if n_ok == 0:
         counts = ", ".join(f"{k} {v}" for k, v in reg.status_counts().items())
@@ -358,6 +369,10 @@ def _add_run_options(p):
     g.add_argument("--draws", type=int, default=60, help="posterior draws propagated to angles")
     g.add_argument("--dist", default=None, help="known lens distortion k1,k2,p1,p2,k3 (use --dist=...)")
     g.add_argument("--min-score", type=float, default=0.3)
+    g.add_argument("--camera-side", choices=("auto", "main", "far"), default="auto",
+                   help="side of the track the camera stands on: main (home straight stands, runner goes "
+                        "left to right), far (across the infield); auto decides by evidence (default; "
+                        "clip.json 'camera_side' is used when given)")
     g.add_argument("--overwrite", action="store_true",
                    help="use a non-empty --out that holds files probreg did not write: they are moved aside "
                         "to OUT.previous-<time>, never deleted (a probreg result is replaced without it)")
@@ -425,6 +440,8 @@ def build_parser():
                    help="which family member when a height occurs twice (default: zoomed-in)")
     c.add_argument("--no-smooth", action="store_true", help="no temporal smoothing of the vanishing point")
     c.add_argument("--min-score", type=float, default=0.3, help="keypoints below this score are missing")
+    c.add_argument("--camera-side", choices=("auto", "main", "far"), default="auto",
+                   help="side of the track the camera stands on (auto: decided by the athlete's motion)")
     c.add_argument("--overwrite", action="store_true", help="move a non-empty foreign --out aside (never deleted)")
     c.set_defaults(func=_cmd_calibrate)
 
@@ -481,6 +498,7 @@ def build_parser():
     b.add_argument("--jobs", type=int, default=None)
     b.add_argument("--suite-dir", type=Path, default=None, help="reuse an existing generated suite")
     b.add_argument("--model", type=Path, default=None, help="ONNX pose model for 'bench detect'")
+    b.add_argument("--only", default=None, help="comma-separated clip names ('bench validation')")
     b.set_defaults(func=_cmd_bench)
     return p
 

@@ -12,8 +12,9 @@ same two cases at the clip's start or end, where there is nothing to bridge from
 ``bridged_missing_image`` (likewise, camera interpolated from its neighbours);
 otherwise the lane status of the frame, e.g. ``too_few_lines``, ``no_straight``).
 
-``run.json`` also holds the clip ``verdict`` (``"ok"`` or, when no frame produced an angle,
-``"uncalibrated"``) with ``verdict_reasons``, the notes about the input (``input_notes``:
+``run.json`` also holds the clip ``verdict`` (``"ok"``, ``"unreliable"`` or ``"uncalibrated"``,
+:func:`probreg.inference.verdict.clip_verdict`) with ``verdict_reasons``, the camera side and
+the evidence for both sides (``camera_side``), the notes about the input (``input_notes``:
 ignored files, missing images, absurd keypoints) and, when keypoints lay far outside the
 image, their count per frame (``keypoints_outside_image``).
 """
@@ -31,9 +32,10 @@ from .calibration.registration import camera_json, register_clip
 from .geometry import JOINT_NAMES
 from .inference import ModelPriors, angle_bands, gait_intervals
 from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, SamplerSettings
+from .inference.verdict import bone_length_cv, clip_verdict
 from .io.clip import ClipFormatError, load_clip, write_json
-from .io.output import atomic_output_dir, prepare_output
 from .io.frames import has_frames
+from .io.output import atomic_output_dir, prepare_output
 from .io.results import write_angles_csv, write_joints_npz
 
 __all__ = ["RunOptions", "RunResult", "run_clip", "posterior_inference_data"]
@@ -51,6 +53,8 @@ class RunOptions:
     report: bool = True
     # move a non-empty output folder that holds files probreg did not write aside (never deleted)
     overwrite: bool = False
+    # "auto" (decided by evidence; clip.json "camera_side" when given there), "main" or "far"
+    camera_side: str = "auto"
     # None: the calibrated bands (probreg.inference.BAND_SCALE and BAND_CURVATURE_S2); a number
     # scales the bootstrap band by it, without the curvature term (1.0: raw bootstrap bands)
     band_inflation: float | None = None
@@ -167,9 +171,15 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
     if seen < 10:
         raise ValueError(f"{clip_dir}: only {seen} frames have a detected athlete (at least 8 joints); "
                          f"the model needs at least 10")
+    given = options.camera_side if options.camera_side != "auto" else clip.meta.get("camera_side", "auto")
+    if given not in ("auto", "main", "far"):
+        raise ClipFormatError(f"{clip.path / 'clip.json'}: 'camera_side' must be auto, main or far, got {given!r}")
     reg = register_clip(clip)
     t1 = time.perf_counter()
     log(f"lanes: {reg.status_counts()} ({t1 - t0:.1f} s)")
+    side = reg.orient(options.priors.camera_height.centre(), clip.keypoints_px, options.branch, fps=clip.fps,
+                      given=given)
+    log(f"camera side: {side.chosen} ({side.source}; log-evidence ratio {side.log_ratio:.1f})")
     model = ClipModel(reg, clip.keypoints_px, clip.fps, clip.athlete_lane, priors=options.priors,
                       dist=options.dist, branch=options.branch)
     sampler, tau = model.sample(options.sampler)
@@ -198,10 +208,11 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
     timings = {"total_s": time.perf_counter() - t0, "lanes_s": t1 - t0, **model.timings}
     out_dir = Path(out_dir)
     n_angle = int(np.sum(np.any(np.isfinite(np.array([v[0] for v in summ.values()])), axis=0)))
-    verdict, reasons = "ok", []
-    if n_angle == 0:
-        verdict = "uncalibrated"
-        reasons.append(f"frames_with_angles 0/{clip.n_frames}")
+    prior_h = options.priors.camera_height
+    verdict, reasons = clip_verdict(
+        clip.n_frames, calibrated=sum(c is not None for c in cam_list), frames_with_angles=n_angle,
+        rhat=diag["rhat_height"], ess=diag["ess_height"], log_height_draws=flat[:, 0],
+        log_height_prior_sd=getattr(prior_h, "log_sd", None), side=side, bone_cv_pct=bone_length_cv(joints_med))
     with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=[clip_dir], log=log) as tmp:
         write_angles_csv(tmp / "angles.csv", clip.fps, {k: v[0] for k, v in summ.items()},
                          {k: v[1] for k, v in summ.items()}, {k: v[2] for k, v in summ.items()})
@@ -215,6 +226,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
         extra = {} if clip.keypoints_outside is None else {
             "keypoints_outside_image": clip.keypoints_outside.tolist()}
         write_json(tmp / "run.json", {"verdict": verdict, "verdict_reasons": reasons,
+                                     "camera_side": side.to_dict(),
                                      "input_notes": list(clip.notes), **extra,
                                      "diagnostics": diag, "timings_s": timings, "height_m": height,
                                      "frame_status": status, "noise_px": model.noise_sd,

@@ -25,6 +25,7 @@ BENCHMARKS = {
     "band-calibration": "probreg.bench.band_calibration:run",
     "detect": "probreg.bench.detect:run",
     "distortion": "probreg.bench.distortion:run",
+    "validation": "probreg.bench.validation:run",
 }
 
 

@@ -94,7 +94,8 @@ def score_result(clip_dir, out_dir):
     gait_scores = {}
     for name, t in true_gait(clip_dir).items():
         g = gait.get(name)
-        if g is None or not np.isfinite(t) or g["median"] is None or not np.isfinite(g["median"]):
+        if (g is None or not np.isfinite(t) or any(g.get(k) is None or not np.isfinite(g[k])
+                                                    for k in ("median", "lo", "hi"))):
             continue
         gait_scores[name] = {"median": g["median"], "lo": g["lo"], "hi": g["hi"], "truth": t,
                              "error": g["median"] - t, "rel_pct": 100 * (g["median"] - t) / abs(t) if t else np.nan,

@@ -26,8 +26,10 @@ from .registration import (
     running_sign,
     undistorted_members,
 )
+from .side import SIDES, CameraSide, camera_side_evidence
 
 __all__ = [
+    "SIDES", "CameraSide", "camera_side_evidence",
     "FamilyMember", "CalibrationFamily", "FamilyParameter", "HeightParameter", "FovParameter",
     "AzimuthParameter", "PARAMETERS", "SequenceCalibration", "CalibrationError",
     "DEFAULT_HEIGHT_M", "ANKLE_HEIGHT_M", "ClipRegistration", "athlete_ground_track",

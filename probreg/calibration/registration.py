@@ -23,6 +23,7 @@ from ..lanes import (
     track_lanes,
     undistort_frame_lanes,
 )
+from .side import camera_side_evidence, forward_px_of
 from .family import CalibrationError, CalibrationFamily, SequenceCalibration
 
 __all__ = ["DEFAULT_HEIGHT_M", "ANKLE_HEIGHT_M", "ClipRegistration", "athlete_ground_track", "running_sign", "lane_anchor_shift", "register_frames", "register_clip", "undistorted_members"]
@@ -125,7 +126,7 @@ class ClipRegistration:
             ``line_offset`` (absolute index of observed line 0 after anchoring), ``consistency_m``.
         """
         if keypoints_px is not None and not getattr(self, "_oriented", False):
-            self.orient(height_m, keypoints_px, branch)
+            self.orient(height_m, keypoints_px, branch)  # camera side by evidence (fps 50 assumed)
         seq = self.sequence
         if dist is not None and np.any(dist):
             fams = list(seq.families)
@@ -232,18 +233,26 @@ class ClipRegistration:
                 prev_y = y
         return offsets
 
-    def orient(self, height_m, keypoints_px, branch="narrow"):
-        """Fix the running direction: lane lines cannot tell +x from -x, the athlete can.
-
-        Cameras at ``height_m`` with the current orientation put the athlete's
-        ground track moving along -x?  Then the families are rebuilt with the
-        opposite forward direction.
-        """
+    def orient(self, height_m, keypoints_px, branch="narrow", fps=50.0, given="auto"):
+        """Fix the camera side (the running direction): lane lines cannot tell +x from -x,
+        the athlete can (:func:`probreg.calibration.side.camera_side_evidence`, with the
+        cameras of the "main" hypothesis at ``height_m``).  Returns the :class:`CameraSide`."""
+        if not np.array_equal(self.forward_px, forward_px_of("main")):
+            self.set_camera_side("main")
         seq = self.sequence
         seq.branch = branch
         seq.line_offsets = self.track_offsets(seq, height_m)
-        if running_sign(seq.cameras_at_height(height_m), keypoints_px) < 0:
-            self.forward_px = -self.forward_px
+        ground = athlete_ground_track(seq.cameras_at_height(height_m), keypoints_px)
+        side = camera_side_evidence(ground, keypoints_px, fps, given=given)
+        self.set_camera_side(side.chosen)
+        self.camera_side = side
+        return side
+
+    def set_camera_side(self, side):
+        """Rebuild the families for a camera side (``"main"``: track +x to the image right)."""
+        fwd = forward_px_of(side)
+        if not np.array_equal(fwd, self.forward_px):
+            self.forward_px = fwd
             fams = [_family_or_none(fl, self.forward_px, self.lane_width_m) for fl in self.frame_lanes]
             self.sequence = SequenceCalibration(fams, self.image_size, self.lane_width_m)
             self._glitches = None

@@ -1,0 +1,202 @@
+"""probreg on clips from an independent generator, run the way a user runs it.
+
+Every clip of ``shared/data/validation`` (ten clips from a generator that is not probreg's:
+cameras across the infield, grazing, steep, wide, long lens, 25 fps, real mocap motion) goes
+through the command line exactly as a user types it, ``probreg run CLIP --out OUT --seed 0``
+with the default priors and no lens given, in a fresh process (start-up, imports, image
+decoding and writing included in the wall time).  Each result is scored against the clip's
+ground truth:
+
+* knee-angle error of the posterior median (deg, both knees, every frame) next to the planar 2D
+  peer's (the validation README's Butterworth column), and the fraction of frames whose true
+  knee angle lies inside the 90 % band;
+* camera height error (%) and whether its 90 % interval holds the truth; the same for the
+  athlete's stature (from ``posterior.nc``);
+* camera side (the camera centre on the same side of the athlete's lane as the true one) and
+  camera position error after one shift along ``x`` per clip (the along-track position is not
+  observable; the shift is the median difference of the pelvis ``x``), in % of the horizontal
+  camera-athlete distance;
+* the clip verdict of ``run.json`` with its reasons, the exit code and the wall time.
+
+The clips check; they are never used to fit anything.
+"""
+
+from __future__ import annotations
+
+import json
+import re
+import subprocess
+import sys
+import tempfile
+import time
+from pathlib import Path
+
+import numpy as np
+
+from ..geometry import JOINT_INDEX
+from ..io.clip import load_groundtruth, read_cameras_json
+from .common import BenchReport, find_shared_data, md_table
+from .posterior import score_result
+
+__all__ = ["run", "score_validation", "peer_knee_errors"]
+
+
+def peer_knee_errors(readme: Path):
+    """``{clip: knee error deg}`` of the planar 2D peer (Butterworth 6 Hz column) from the
+    validation README's table ``| clip | raw | Butterworth 6 Hz |``."""
+    out = {}
+    for line in readme.read_text(encoding="utf-8").splitlines():
+        m = re.match(r"\|\s*(v\d\d_\w+)\s*\|\s*([\d.]+)\s*\|\s*([\d.]+)\s*\|\s*$", line)
+        if m:
+            out[m.group(1)] = float(m.group(3))
+    return out
+
+
+def _stature_interval(out_dir: Path):
+    import xarray as xr
+
+    with xr.open_dataset(out_dir / "posterior.nc", group="posterior") as post:
+        s = np.asarray(post["stature"]).ravel()
+    return float(np.median(s)), float(np.percentile(s, 5)), float(np.percentile(s, 95))
+
+
+def score_validation(clip_dir: Path, out_dir: Path):
+    """Scores of one result folder against a validation clip's ground truth (see the module
+    docstring); extends :func:`probreg.bench.posterior.score_result`."""
+    s = score_result(clip_dir, out_dir)
+    gt = load_groundtruth(clip_dir)
+    j = np.load(out_dir / "joints3d.npz")["median"]
+    pel_est = j[:, JOINT_INDEX["pelvis"]]
+    pel_true = gt.joints3d_track_m[:, JOINT_INDEX["pelvis"]]
+    ok = np.all(np.isfinite(pel_est), -1)
+    shift = float(np.median(pel_true[ok, 0] - pel_est[ok, 0])) if ok.any() else 0.0
+    cams = read_cameras_json(out_dir / "camera.json")
+    pos, side_ok = [], []
+    for i, c in cams.items():
+        if c is None or i >= len(gt.cameras):
+            continue
+        g = gt.cameras[i]
+        C = c.C + np.array([shift, 0.0, 0.0])
+        dist = np.linalg.norm(g.C[:2] - pel_true[i, :2])
+        pos.append(100 * np.linalg.norm(C - g.C) / dist)
+        side_ok.append(np.sign(c.C[1] - pel_true[i, 1]) == np.sign(g.C[1] - pel_true[i, 1]))
+    st_true = float(gt.athlete["stature_m"])
+    st_med, st_lo, st_hi = _stature_interval(out_dir)
+    run = json.loads((out_dir / "run.json").read_text())
+    s.update({
+        "position_pct": float(np.mean(pos)) if pos else float("nan"),
+        "side_ok": bool(side_ok) and bool(np.mean(side_ok) > 0.5),
+        "stature_true": st_true, "stature_med": st_med,
+        "stature_in_interval": bool(st_lo <= st_true <= st_hi),
+        "verdict": run.get("verdict", "n/a"), "verdict_reasons": run.get("verdict_reasons", []),
+        "camera_side": run.get("camera_side", {}).get("chosen", "n/a"),
+    })
+    return s
+
+
+def _run_cli(clip: Path, out: Path, extra=()):
+    """``probreg run`` in a fresh process; returns (exit code, wall s, last stderr line)."""
+    cmd = [sys.executable, "-m", "probreg", "run", str(clip), "--out", str(out), "--seed", "0", *extra]
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True)
+    dt = time.perf_counter() - t0
+    err = [ln for ln in proc.stderr.splitlines() if ln.strip()]
+    return proc.returncode, dt, (err[-1] if err else "")
+
+
+def run(args=None):
+    rep = BenchReport("validation", "Independent validation clips, end to end through the command line")
+    rep.add(__doc__.split("\n\n", 1)[1])
+    shared = find_shared_data(getattr(args, "shared", None))
+    vdir = None if shared is None else shared / "validation"
+    if vdir is None or not vdir.is_dir():
+        rep.add("**Skipped**: `shared/data/validation` was not found (give `--shared PATH`).\n")
+        return rep
+    peer = peer_knee_errors(vdir / "README.md")
+    clips = sorted(p for p in vdir.iterdir() if (p / "clip.json").exists())
+    only = getattr(args, "only", None)
+    if only:
+        clips = [c for c in clips if c.name in set(only.split(","))]
+    rows, scores = [], {}
+    with tempfile.TemporaryDirectory() as tmp:
+        for clip in clips:
+            out = Path(tmp) / clip.name
+            code, dt, last = _run_cli(clip, out)
+            if not (out / "angles.csv").exists():
+                rows.append([clip.name, "no result", "", "", "", "", "", "", "", f"exit {code}: {last}", dt])
+                scores[clip.name] = {"exit": code, "time_s": dt, "failed": True}
+                continue
+            s = score_validation(clip, out)
+            s.update(exit=code, time_s=dt, failed=False)
+            scores[clip.name] = s
+            p = peer.get(clip.name, float("nan"))
+            reasons = "; ".join(s["verdict_reasons"])
+            rows.append([clip.name, s["knee_deg"], p, 100 * s["knee_coverage"], s["height_pct"],
+                         "yes" if s["height_in_interval"] else "no",
+                         "yes" if s["stature_in_interval"] else "no",
+                         "yes" if s["side_ok"] else "**no**", s["position_pct"],
+                         f"{s['verdict']}" + (f" ({reasons})" if reasons else "") + f", exit {code}", dt])
+    rep.add("## Per clip\n")
+    rep.add(md_table(["clip", "knee err deg", "peer knee err deg", "knee in 90 % band %", "camera height err %",
+                      "height in 90 %", "stature in 90 %", "camera side right", "camera position err %",
+                      "verdict (reasons), exit", "wall s"], rows))
+    ok = [s for s in scores.values() if not s.get("failed")]
+    unflagged = [s for s in ok if s["verdict"] == "ok"]
+    names_ok = [n for n, s in scores.items() if not s.get("failed")]
+
+    def good(n):
+        s = scores[n]
+        return s["knee_deg"] <= 4 and s["knee_deg"] < peer.get(n, np.inf)
+
+    summary = {
+        "clips": len(scores), "failed": sum(s.get("failed", False) for s in scores.values()),
+        "flagged": sum(s["verdict"] != "ok" for s in ok),
+        "knee_deg_mean_all": float(np.mean([s["knee_deg"] for s in ok])) if ok else float("nan"),
+        "knee_deg_mean_unflagged": float(np.mean([s["knee_deg"] for s in unflagged])) if unflagged else float("nan"),
+        "peer_knee_deg_mean": float(np.mean([peer[n] for n in names_ok if n in peer])) if names_ok else float("nan"),
+        "knee_coverage_mean": float(np.mean([s["knee_coverage"] for s in ok])) if ok else float("nan"),
+        "min_unflagged_coverage": float(min([s["knee_coverage"] for s in unflagged], default=float("nan"))),
+        "height_hits": sum(s["height_in_interval"] for s in ok),
+        "stature_hits": sum(s["stature_in_interval"] for s in ok),
+        "side_right": sum(s["side_ok"] for s in ok),
+        "position_pct_mean_unflagged": float(np.mean([s["position_pct"] for s in unflagged])) if unflagged else float("nan"),
+        "position_pct_max_unflagged": float(max([s["position_pct"] for s in unflagged], default=float("nan"))),
+        "unflagged_bad": [n for n in names_ok if scores[n]["verdict"] == "ok" and not good(n)],
+        "unflagged_over_6": [n for n in names_ok if scores[n]["verdict"] == "ok" and scores[n]["knee_deg"] > 6],
+        "time_s_median": float(np.median([s["time_s"] for s in scores.values()])),
+        "time_s_max": float(max(s["time_s"] for s in scores.values())),
+    }
+    rep.numbers = summary
+    n = len(ok)
+    checks = [
+        ("every clip good (knee <= 4 deg and better than the peer) or flagged", "all",
+         "not met by: " + (", ".join(summary["unflagged_bad"]) or "none"), not summary["unflagged_bad"]),
+        ("no unflagged clip above 6 deg", "none", ", ".join(summary["unflagged_over_6"]) or "none",
+         not summary["unflagged_over_6"]),
+        ("clips flagged", "<= 10 %", f"{summary['flagged']} of {n}", summary["flagged"] <= 0.1 * max(n, 1)),
+        ("mean knee error, unflagged clips", "<= 3 deg", f"{summary['knee_deg_mean_unflagged']:.2f} deg "
+         f"(all clips {summary['knee_deg_mean_all']:.2f}, peer {summary['peer_knee_deg_mean']:.2f})",
+         summary["knee_deg_mean_unflagged"] <= 3),
+        ("knee 90 % band coverage, mean", "85-95 %", f"{100 * summary['knee_coverage_mean']:.1f} %",
+         0.85 <= summary["knee_coverage_mean"] <= 0.95),
+        ("knee coverage, worst unflagged clip", ">= 75 %", f"{100 * summary['min_unflagged_coverage']:.1f} %",
+         summary["min_unflagged_coverage"] >= 0.75),
+        ("camera height 90 % interval holds the truth", "80-95 % of clips", f"{summary['height_hits']} of {n}",
+         0.8 * n <= summary["height_hits"] <= 0.95 * n + 0.5),
+        ("stature 90 % interval holds the truth", "80-95 % of clips", f"{summary['stature_hits']} of {n}",
+         0.8 * n <= summary["stature_hits"] <= 0.95 * n + 0.5),
+        ("camera on the correct side", "every clip", f"{summary['side_right']} of {n}", summary["side_right"] == n),
+        ("camera position, unflagged clips", "<= 10 % each, <= 3 % mean",
+         f"mean {summary['position_pct_mean_unflagged']:.1f} %, max {summary['position_pct_max_unflagged']:.1f} %",
+         summary["position_pct_max_unflagged"] <= 10 and summary["position_pct_mean_unflagged"] <= 3),
+        ("no traceback / failed run", "none", f"{summary['failed']} failed", summary["failed"] == 0),
+        ("wall time per clip (CLI, 40-70 frames)", "not worse than before (median 26 s on 2026-11-25's "
+         "code, same machine)", f"median {summary['time_s_median']:.1f} s, max {summary['time_s_max']:.1f} s",
+         summary["time_s_median"] <= 30),
+    ]
+    rep.add("## Targets (issue 25)\n")
+    rep.add(md_table(["target", "wanted", "measured", "met"], [[a, b, c, "yes" if d else "**no**"]
+                                                              for a, b, c, d in checks]))
+    rep.add("The randomised held-out set of issue 25 (>= 40 set-ups from the broadened generator) is not "
+            "built yet; these numbers are the independent validation clips only.\n")
+    return rep

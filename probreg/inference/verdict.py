@@ -1,0 +1,178 @@
+"""The clip verdict: can this result be used as it stands?
+
+probreg computes it itself, from what the run knows, never from ground truth.  Each check is a
+reason of its own, a short machine-readable string with the number that triggered it:
+
+``frames_with_angles 0/F`` -> ``"uncalibrated"``
+    no frame produced an angle.
+``calibrated_frames n/F`` -> ``"uncalibrated"`` when ``n = 0``, else ``"unreliable"``
+    fewer than :attr:`VerdictThresholds.min_calibrated` of the frames have a camera
+    (lanes found and consistent, or bridged): the rest is guessed from too little.
+``R-hat x`` / ``ESS n``
+    the sampler did not mix (walkers as chains; R-hat above 1.1 or fewer than 100 effective
+    draws of the camera height): the bands are not a posterior yet.
+``posterior multimodal (...)``
+    the camera height's posterior has separate modes (a dip below half the smaller mode
+    between them): two different cameras explain the clip, and the median sits between them.
+``camera_side evidence ratio x`` / ``(cues disagree)``
+    the side of the track the camera stands on is not settled by the athlete's motion
+    (:mod:`probreg.calibration.side`).
+``bone length cv x %``
+    the lifting holds every limb at one length; the posterior-median skeleton varies only
+    where rays miss their limb spheres or the draws disagree on the body's configuration.
+    A coefficient of variation above 15 % (a clean lifting stays under ~7 % on noisy 2D)
+    means camera and skeleton do not fit together.
+``prior-dominated height (...)``
+    the camera height's posterior is hardly narrower than its prior: the clip did not
+    measure it, and every metric number rests on the prior.
+"""
+
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import numpy as np
+
+from ..geometry import JOINT_INDEX
+
+__all__ = ["VerdictThresholds", "clip_verdict", "bone_length_cv", "posterior_modes"]
+
+_LIMBS = {"thigh": ("hip", "knee"), "shank": ("knee", "ankle"), "upper_arm": ("shoulder", "elbow"),
+          "forearm": ("elbow", "wrist")}
+
+
+@dataclass(frozen=True)
+class VerdictThresholds:
+    """Limits of the verdict's checks (see the module docstring for where each comes from)."""
+
+    min_calibrated: float = 0.5
+    max_rhat: float = 1.1
+    min_ess: float = 100.0
+    max_bone_cv_pct: float = 15.0
+    max_prior_sd_ratio: float = 0.5
+    min_side_log_ratio: float = float(np.log(20.0))
+
+
+def bone_length_cv(joints_track_m):
+    """Coefficient of variation (%) of each limb's length over frames and both sides.
+
+    Parameters
+    ----------
+    joints_track_m : ndarray, shape (F, 17, 3)
+
+    Returns
+    -------
+    dict
+        ``{"thigh", "shank", "upper_arm", "forearm"}`` -> percent (NaN without data).
+
+    >>> j = np.zeros((3, 17, 3)); j[:, JOINT_INDEX["l_knee"], 2] = j[:, JOINT_INDEX["r_knee"], 2] = 0.45
+    >>> bone_length_cv(j)["thigh"]
+    0.0
+    """
+    j = np.asarray(joints_track_m, float)
+    out = {}
+    for name, (a, b) in _LIMBS.items():
+        L = np.concatenate([np.linalg.norm(j[:, JOINT_INDEX[f"{s}_{a}"]] - j[:, JOINT_INDEX[f"{s}_{b}"]], axis=-1)
+                            for s in ("l", "r")])
+        L = L[np.isfinite(L)]
+        out[name] = float(100 * np.std(L) / np.mean(L)) if len(L) > 2 and np.mean(L) > 0 else float("nan")
+    return out
+
+
+def posterior_modes(samples, min_rel_height=0.1, max_dip=0.5, n_grid=512):
+    """Locations of the separate modes of a 1-D posterior sample (Gaussian KDE).
+
+    A local maximum counts when it is at least ``min_rel_height`` of the highest and the
+    density between it and every stronger mode dips below ``max_dip`` of the smaller of the two.
+
+    >>> rng = np.random.default_rng(0)
+    >>> len(posterior_modes(rng.normal(0, 1, 4000)))
+    1
+    >>> len(posterior_modes(np.r_[rng.normal(0, 0.1, 2000), rng.normal(2, 0.1, 2000)]))
+    2
+    """
+    from scipy.stats import gaussian_kde
+
+    x = np.asarray(samples, float).ravel()
+    x = x[np.isfinite(x)]
+    if len(x) < 20 or np.ptp(x) == 0:
+        return [float(np.median(x))] if len(x) else []
+    xs = np.linspace(x.min(), x.max(), n_grid)
+    d = gaussian_kde(x)(xs)
+    peaks = [i for i in range(1, n_grid - 1) if d[i] > d[i - 1] and d[i] >= d[i + 1]]
+    if d[0] > d[1]:
+        peaks.append(0)
+    if d[-1] > d[-2]:
+        peaks.append(n_grid - 1)
+    modes = []
+    for i in sorted(peaks, key=lambda i: -d[i]):
+        if d[i] < min_rel_height * d.max():
+            continue
+        if all(d[min(i, j):max(i, j) + 1].min() < max_dip * min(d[i], d[j]) for j in modes):
+            modes.append(i)
+    return [float(xs[i]) for i in sorted(modes)]
+
+
+def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, log_height_draws=None,
+                 log_height_prior_sd=None, side=None, bone_cv_pct=None,
+                 thresholds: VerdictThresholds = VerdictThresholds()):
+    """The clip verdict and its reasons.
+
+    Parameters
+    ----------
+    n_frames : int
+    calibrated : int
+        Frames with a camera.
+    frames_with_angles : int
+        Frames with at least one angle.
+    rhat, ess : float, optional
+        Sampler diagnostics of the camera height.
+    log_height_draws : ndarray, optional
+        Posterior draws of the log camera height.
+    log_height_prior_sd : float, optional
+        Prior sd of the log camera height.
+    side : CameraSide, optional
+    bone_cv_pct : dict, optional
+        :func:`bone_length_cv` of the posterior-median joints.
+
+    Returns
+    -------
+    verdict : str
+        ``"ok"``, ``"unreliable"`` or ``"uncalibrated"``.
+    reasons : list of str
+
+    >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900)
+    ('ok', [])
+    >>> clip_verdict(100, 0, 0)
+    ('uncalibrated', ['frames_with_angles 0/100', 'calibrated_frames 0/100'])
+    """
+    t = thresholds
+    reasons, uncal = [], False
+    if frames_with_angles == 0:
+        reasons.append(f"frames_with_angles 0/{n_frames}")
+        uncal = True
+    if calibrated == 0 or calibrated < t.min_calibrated * n_frames:
+        reasons.append(f"calibrated_frames {calibrated}/{n_frames}")
+        uncal = uncal or calibrated == 0
+    if rhat is not None and np.isfinite(rhat) and rhat > t.max_rhat:
+        reasons.append(f"R-hat {rhat:.3g}")
+    if ess is not None and np.isfinite(ess) and ess < t.min_ess:
+        reasons.append(f"ESS {ess:.0f}")
+    if log_height_draws is not None and len(np.ravel(log_height_draws)) >= 20:
+        modes = posterior_modes(log_height_draws)
+        if len(modes) > 1:
+            reasons.append("posterior multimodal (camera height modes "
+                           + ", ".join(f"{np.exp(m):.1f} m" for m in modes) + ")")
+        sd = float(np.std(log_height_draws))
+        if log_height_prior_sd and sd > t.max_prior_sd_ratio * log_height_prior_sd:
+            reasons.append(f"prior-dominated height (posterior log-sd {sd:.2f}, prior {log_height_prior_sd:.2f})")
+    if side is not None and side.source == "evidence":
+        if side.log_ratio < t.min_side_log_ratio or side.cues_disagree:
+            reasons.append(f"camera_side evidence ratio {np.exp(min(side.log_ratio, 50.0)):.3g}"
+                           + (" (cues disagree)" if side.cues_disagree else ""))
+    if bone_cv_pct:
+        worst = max(bone_cv_pct, key=lambda k: np.nan_to_num(bone_cv_pct[k], nan=-1))
+        if np.isfinite(bone_cv_pct[worst]) and bone_cv_pct[worst] > t.max_bone_cv_pct:
+            reasons.append(f"bone length cv {bone_cv_pct[worst]:.0f} % ({worst})")
+    verdict = "uncalibrated" if uncal else ("unreliable" if reasons else "ok")
+    return verdict, reasons

@@ -1,0 +1,95 @@
+"""Known answers for each reason of the clip verdict: one input built to trigger it, one not to."""
+
+import numpy as np
+import pytest
+
+from probreg.calibration import CameraSide
+from probreg.geometry import JOINT_INDEX
+from probreg.inference import bone_length_cv, clip_verdict, posterior_modes
+
+GOOD = dict(n_frames=100, calibrated=100, frames_with_angles=100, rhat=1.01, ess=900)
+
+
+def _side(llr_track, llr_knee, source="evidence"):
+    cues = {"ground_track": {"llr": llr_track}, "knee_fold": {"llr": llr_knee}}
+    llr = llr_track + llr_knee
+    return CameraSide(chosen="main" if llr >= 0 else "far", source=source,
+                      log_evidence={"main": llr / 2, "far": -llr / 2}, cues=cues)
+
+
+def test_a_clean_clip_is_ok():
+    rng = np.random.default_rng(1)
+    verdict, reasons = clip_verdict(**GOOD, log_height_draws=rng.normal(np.log(15), 0.05, 4000),
+                                    log_height_prior_sd=0.5, side=_side(40.0, 30.0),
+                                    bone_cv_pct={"thigh": 3.0, "shank": 4.0, "upper_arm": 4.0, "forearm": 6.0})
+    assert (verdict, reasons) == ("ok", [])
+
+
+def test_no_angle_and_no_calibrated_frame_is_uncalibrated():
+    assert clip_verdict(250, 0, 0) == ("uncalibrated", ["frames_with_angles 0/250", "calibrated_frames 0/250"])
+
+
+def test_few_calibrated_frames_are_unreliable():
+    assert clip_verdict(250, 100, 250) == ("unreliable", ["calibrated_frames 100/250"])
+    assert clip_verdict(250, 125, 250) == ("ok", [])
+
+
+@pytest.mark.parametrize("rhat, ess, reason", [(1.12, 900, "R-hat 1.12"), (1.01, 45, "ESS 45")])
+def test_a_sampler_that_did_not_mix_is_unreliable(rhat, ess, reason):
+    assert clip_verdict(100, 100, 100, rhat=rhat, ess=ess) == ("unreliable", [reason])
+    assert clip_verdict(100, 100, 100, rhat=1.05, ess=150) == ("ok", [])
+
+
+def test_a_multimodal_height_posterior_is_unreliable():
+    rng = np.random.default_rng(2)
+    two = np.r_[rng.normal(np.log(8), 0.03, 3000), rng.normal(np.log(16), 0.03, 2000)]
+    verdict, reasons = clip_verdict(**GOOD, log_height_draws=two, log_height_prior_sd=2.0)  # wide prior
+    assert verdict == "unreliable" and reasons == ["posterior multimodal (camera height modes 8.0 m, 16.0 m)"]
+    skewed = rng.gamma(4.0, 0.05, 5000)  # one skewed mode is not two
+    assert clip_verdict(**GOOD, log_height_draws=skewed, log_height_prior_sd=0.5) == ("ok", [])
+
+
+def test_posterior_modes_known_answers():
+    rng = np.random.default_rng(3)
+    assert len(posterior_modes(rng.normal(0, 1, 5000))) == 1
+    m = posterior_modes(np.r_[rng.normal(-2, 0.2, 2500), rng.normal(2, 0.2, 2500)])
+    assert len(m) == 2 and abs(m[0] + 2) < 0.1 and abs(m[1] - 2) < 0.1
+    # a small bump (5 % of the mass) under the threshold is not a mode
+    assert len(posterior_modes(np.r_[rng.normal(0, 0.2, 4900), rng.normal(3, 0.2, 100)], min_rel_height=0.2)) == 1
+
+
+def test_a_prior_dominated_height_is_unreliable():
+    rng = np.random.default_rng(4)
+    verdict, reasons = clip_verdict(**GOOD, log_height_draws=rng.normal(np.log(12), 0.4, 4000),
+                                    log_height_prior_sd=0.5)
+    assert verdict == "unreliable" and reasons[0].startswith("prior-dominated height (posterior log-sd 0.40")
+    assert clip_verdict(**GOOD, log_height_draws=rng.normal(np.log(12), 0.05, 4000),
+                        log_height_prior_sd=0.5) == ("ok", [])
+
+
+def test_weak_or_contradicting_side_evidence_is_unreliable():
+    v, r = clip_verdict(**GOOD, side=_side(1.0, 0.2))
+    assert v == "unreliable" and r == ["camera_side evidence ratio 3.32"]
+    v, r = clip_verdict(**GOOD, side=_side(60.0, -40.0))
+    assert v == "unreliable" and r[0].endswith("(cues disagree)")
+    assert clip_verdict(**GOOD, side=_side(60.0, 40.0)) == ("ok", [])
+    assert clip_verdict(**GOOD, side=_side(0.0, 0.0, source="given")) == ("ok", [])  # the user said so
+
+
+def test_inconsistent_bone_lengths_are_unreliable(rng):
+    F = 60
+    j = np.zeros((F, 17, 3))
+    for s in ("l", "r"):
+        j[:, JOINT_INDEX[f"{s}_hip"]] = [0, 0, 0.9]
+        j[:, JOINT_INDEX[f"{s}_knee"]] = [0, 0, 0.45]
+        j[:, JOINT_INDEX[f"{s}_ankle"]] = [0, 0, 0.05]
+        j[:, JOINT_INDEX[f"{s}_shoulder"]] = [0, 0, 1.4]
+        j[:, JOINT_INDEX[f"{s}_elbow"]] = [0, 0, 1.1]
+        j[:, JOINT_INDEX[f"{s}_wrist"]] = [0.25, 0, 1.1]
+    noisy = j + rng.normal(0, 0.01, j.shape)  # ~1 cm: a clean lifting
+    cv = bone_length_cv(noisy)
+    assert max(cv.values()) < 10 and clip_verdict(**GOOD, bone_cv_pct=cv) == ("ok", [])
+    broken = j.copy()
+    broken[::3, JOINT_INDEX["l_ankle"]] = [0, 0.6, 0.3]  # every third shank is 70 % too long
+    v, r = clip_verdict(**GOOD, bone_cv_pct=bone_length_cv(broken))
+    assert v == "unreliable" and r[0].startswith("bone length cv") and r[0].endswith("(shank)")
