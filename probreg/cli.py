@@ -359,11 +359,11 @@ def _cmd_bench(args):
 
 def _add_run_options(p):
     g = p.add_argument_group("model and sampling")
-    g.add_argument("--height-m", type=float, default=None, help="camera height prior median (m); default 12")
+    g.add_argument("--height-m", type=float, default=None, help="camera height prior median (m); default 9 (log-sd 0.8: 2-40 m)")
     g.add_argument("--height-log-sd", type=float, default=None,
-                   help="log-sd of the height prior (default 0.5; 0.05 when --height-m is given)")
-    g.add_argument("--stature", type=float, default=None, help="athlete's stature prior mean (m); default 1.76")
-    g.add_argument("--stature-sd", type=float, default=None, help="stature prior sd (m); default 0.10")
+                   help="log-sd of the height prior (default 0.8; 0.05 when --height-m is given)")
+    g.add_argument("--stature", type=float, default=None, help="athlete's stature prior mean (m); default 1.80 (sd 0.16: 1.50-2.10 m)")
+    g.add_argument("--stature-sd", type=float, default=None, help="stature prior sd (m); default 0.16 (0.02 when --stature is given)")
     g.add_argument("--walkers", type=int, default=24)
     g.add_argument("--max-steps", type=int, default=8000, help="sampling budget (steps after burn-in)")
     g.add_argument("--draws", type=int, default=60, help="posterior draws propagated to angles")
@@ -434,7 +434,7 @@ def build_parser():
     c.add_argument("clip", type=Path)
     c.add_argument("--out", type=Path, required=True)
     c.add_argument("--height-m", type=float, default=None,
-                   help="camera height selecting the family member (default 12 m, the prior median)")
+                   help="camera height selecting the family member (default 12 m)")
     c.add_argument("--dist", default=None, help="known/hypothesised lens distortion k1,k2,p1,p2,k3 (write --dist=-0.1,0,0,0,0 when k1 < 0)")
     c.add_argument("--branch", choices=("narrow", "wide"), default="narrow",
                    help="which family member when a height occurs twice (default: zoomed-in)")

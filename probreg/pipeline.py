@@ -72,6 +72,7 @@ class RunResult:
     timings: dict
     verdict: str = "ok"
     verdict_reasons: tuple = ()
+    camera_side: object = None
 
 
 def _arviz():
@@ -235,7 +236,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
                                                 "stature": repr(options.priors.stature)}})
         result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
                            gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
-                           verdict_reasons=tuple(reasons))
+                           verdict_reasons=tuple(reasons), camera_side=side)
         if options.report:
             from .report.html import run_report
 

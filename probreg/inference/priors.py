@@ -7,14 +7,21 @@ every one of which the user can override (command line or ``clip.json``).
 Sources
 -------
 * Camera height of athletics broadcast cameras: no published survey exists;
-  the default is weakly informative, log-normal with median 12 m and log-sd
-  0.5 (90 % between 5.3 and 27 m).  It spans trackside platforms (3-5 m),
-  main-stand positions (8-20 m, stands rise about 0.4-0.5 m per row) and
-  roof-level cameras (25-30 m), the range of the seed paper's and probreg's
-  synthetic set-ups.  Override with the real height when it is known.
-* Stature of athletes: normal, mean 1.76 m, sd 0.10 m, covering elite
-  sprinters and middle-distance runners of both sexes (about 1.56-1.96 m at 2 sd);
-  set it to the athlete's measured stature (with a small sd) when known.
+  the default is weakly informative, log-normal with median 9 m and log-sd 0.8
+  (95 % between 1.9 and 43 m, 90 % between 2.4 and 34 m; a 90 % interval of it holds
+  88 % of heights spread evenly in log over 2-40 m).  It spans every real
+  broadcast position: trackside rail and platform cameras (2-5 m), main-stand
+  positions (8-20 m; stands rise about 0.4-0.5 m per row) and the stand roof
+  (25-40 m).  Override with the real height when it is known.
+* Stature of athletes: normal, mean 1.80 m, sd 0.16 m (95 % between 1.49 and
+  2.11 m; its 90 % interval holds 88 % of statures spread evenly over 1.50-2.10 m):
+  adult athletes of both sexes from 1.50 to 2.10 m (small sprinters and juniors to
+  high jumpers and tall 400 m runners).  A narrower prior (before:
+  1.76 +- 0.10 m) let the stature and with it the camera height of tall or short
+  athletes be confidently wrong: a clip rarely measures the athlete's scale
+  better than this prior (the limb lengths scale with it, and the planted feet
+  only weakly), so the prior's width is the interval's width.  Set the athlete's
+  measured stature (with a small sd) when known.
 * Segment proportions of stature (thigh 0.245, shank 0.246, upper arm
   0.186, forearm 0.146, trunk 0.288, hip-joint separation 0.10, shoulder
   0.207): Drillis & Contini (1966) via Winter (2009), Fig. 4.1; individual
@@ -125,8 +132,8 @@ class LogNormalPrior(Prior):
 class ModelPriors:
     """Priors of the clip model: camera height, stature, segment-proportion multipliers."""
 
-    camera_height: Prior = field(default_factory=lambda: LogNormalPrior(12.0, 0.5))
-    stature: Prior = field(default_factory=lambda: NormalPrior(1.76, 0.10))
+    camera_height: Prior = field(default_factory=lambda: LogNormalPrior(9.0, 0.8))
+    stature: Prior = field(default_factory=lambda: NormalPrior(1.80, 0.16))
     proportion_sd: float = 0.04
 
     @classmethod
@@ -144,12 +151,12 @@ class ModelPriors:
         base = cls()
         ch = base.camera_height
         if height is not None or height_sd is not None:
-            ch = LogNormalPrior(height if height is not None else 12.0,
-                                height_sd if height_sd is not None else (0.05 if height is not None else 0.5))
+            ch = LogNormalPrior(height if height is not None else ch.median,
+                                height_sd if height_sd is not None else (0.05 if height is not None else ch.log_sd))
         st = base.stature
         if stature is not None or stature_sd is not None:
-            st = NormalPrior(stature if stature is not None else 1.76,
-                             stature_sd if stature_sd is not None else (0.02 if stature is not None else 0.10))
+            st = NormalPrior(stature if stature is not None else st.mean,
+                             stature_sd if stature_sd is not None else (0.02 if stature is not None else st.sd))
         return cls(camera_height=ch, stature=st)
 
     def segment_means(self, stature_m):

@@ -95,6 +95,8 @@ def posterior_modes(samples, min_rel_height=0.1, max_dip=0.5, n_grid=512):
 
     x = np.asarray(samples, float).ravel()
     x = x[np.isfinite(x)]
+    if len(x) > 5000:  # a KDE of a long chain costs seconds; an even thinning keeps its shape
+        x = x[np.linspace(0, len(x) - 1, 5000).astype(int)]
     if len(x) < 20 or np.ptp(x) == 0:
         return [float(np.median(x))] if len(x) else []
     xs = np.linspace(x.min(), x.max(), n_grid)

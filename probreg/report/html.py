@@ -18,7 +18,9 @@ __all__ = ["HtmlReport", "draw_skeleton", "clip_report"]
 _CSS = """body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;color:#222}
 table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:3px 8px;text-align:right}
 th{background:#f3f3f3}img{max-width:100%}figure{margin:1em 0}figcaption{color:#555;font-size:90%}
-.note{color:#555;font-size:90%}"""
+.note{color:#555;font-size:90%}
+.banner{background:#fde2e2;border:2px solid #b00;padding:.6em 1em;font-weight:bold}
+.ok{background:#e5f5e5;border:1px solid #3a3;padding:.4em 1em}"""
 
 class HtmlReport:
     """Builds one HTML page section by section.
@@ -189,6 +191,17 @@ def run_report(out_html, clip, result, joints_median, cameras):
     from ..analysis import GAIT_FIELDS
 
     rep = HtmlReport(f"probreg: {Path(str(clip.path)).name}")
+    if result.verdict != "ok":
+        rep.paragraph(f"Verdict: {result.verdict}. " + "; ".join(result.verdict_reasons)
+                      + ". The results below are written for inspection; do not use them as they stand "
+                      "(run.json lists the reasons).", cls="banner")
+    else:
+        rep.paragraph("Verdict: ok (none of probreg's checks on this clip failed: calibrated frames, sampler "
+                      "convergence, posterior shape, camera side, bone-length consistency).", cls="ok")
+    side = getattr(result, "camera_side", None)
+    if side is not None:
+        rep.paragraph(f"Camera side: {side.chosen} ({side.source}; log-evidence ratio {side.log_ratio:.1f} "
+                      f"between the main stand and across the infield).", cls="note")
     d = result.diagnostics
     h = result.height
     post = result.posterior.posterior

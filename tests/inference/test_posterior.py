@@ -53,13 +53,13 @@ def test_posterior_covers_the_known_height_and_lengths(model):
 def test_prior_only_run_recovers_the_prior(model, monkeypatch):
     m, _ = model
     monkeypatch.setattr(m, "log_likelihood", lambda theta: np.zeros(len(np.atleast_2d(theta))))
-    m.priors = ModelPriors()  # default stature prior N(1.76, 0.10)
+    m.priors = ModelPriors()  # defaults: stature N(1.80, 0.16), camera height log-normal(9 m, 0.8)
     sampler, _ = m.sample(SamplerSettings(n_walkers=24, burn_in=300, max_steps=1500, seed=2))
     chain = sampler.get_chain(flat=True)
     st = chain[:, 1]
-    assert abs(st.mean() - 1.76) < 0.03 and 0.07 < st.std() < 0.13
+    assert abs(st.mean() - 1.80) < 0.03 and 0.12 < st.std() < 0.20
     logh = chain[:, 0]
-    assert abs(np.exp(np.median(logh)) - 12.0) < 1.2 and 0.42 < logh.std() < 0.58
+    assert abs(np.exp(np.median(logh)) - 9.0) < 1.0 and 0.65 < logh.std() < 0.95
 
 
 def test_log_prob_is_vectorised_and_rejects_impossible_values(model):
