@@ -55,6 +55,12 @@ def _cmd_synth(args):
     if args.frames is not None and args.frames < 1:
         raise CliError("--frames must be at least 1")
     _prepare_out(args.out, overwrite=args.overwrite)
+    if args.suite == "heldout":
+        from .sim.heldout import write_heldout
+
+        paths = write_heldout(args.out, n_frames=args.frames or 100, jobs=args.jobs, overwrite=args.overwrite)
+        print(f"wrote {len(paths)} held-out clips under {args.out}")
+        return 0
     if args.suite:
         paths = write_suite(args.suite, args.out, images=not args.no_images, n_frames=args.frames,
                             jobs=args.jobs, overwrite=args.overwrite)
@@ -394,7 +400,9 @@ def build_parser():
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--frames", type=int, default=None, help="number of frames (default 250)")
     s.add_argument("--no-images", action="store_true", help="skip rendering frames (keypoints + ground truth only)")
-    s.add_argument("--suite", default=None, help="write a fixed clip suite, e.g. 'bench'")
+    s.add_argument("--suite", default=None,
+                   help="write a fixed clip suite: 'bench' (the benchmark suite) or 'heldout' (40 randomised "
+                        "set-ups with fixed seeds, never tuned on)")
     s.add_argument("--style", default=None, help="override the running style")
     s.add_argument("--camera-height", type=float, default=None, help="override camera height (m)")
     s.add_argument("--distance", type=float, default=None, help="override camera distance across the track (m)")
@@ -499,6 +507,10 @@ def build_parser():
     b.add_argument("--suite-dir", type=Path, default=None, help="reuse an existing generated suite")
     b.add_argument("--model", type=Path, default=None, help="ONNX pose model for 'bench detect'")
     b.add_argument("--only", default=None, help="comma-separated clip names ('bench validation')")
+    b.add_argument("--set", dest="clip_set", choices=("validation", "heldout", "all"), default="all",
+                   help="'bench validation': the shared validation clips, the held-out set, or both")
+    b.add_argument("--heldout-dir", type=Path, default=None,
+                   help="'bench validation': reuse (or write) the held-out clips there")
     b.set_defaults(func=_cmd_bench)
     return p
 

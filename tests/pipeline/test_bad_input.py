@@ -14,12 +14,7 @@ import pytest
 
 from probreg.cli import main
 from probreg.io import ClipFormatError, load_clip
-
-def _output():
-    from probreg.io import output
-
-    return output
-
+from probreg.io.output import MARKER, OutputRefused, atomic_output_dir, prepare_output
 
 FAST_RUN = ["--walkers", "20", "--max-steps", "300", "--draws", "8", "--seed", "1"]
 
@@ -71,7 +66,6 @@ def test_out_with_foreign_files_is_refused_before_any_work(clip, tmp_path, capsy
 
 
 def test_overwrite_moves_foreign_files_aside_never_deletes(tmp_path):
-    OutputRefused, atomic_output_dir, prepare_output = _output().OutputRefused, _output().atomic_output_dir, _output().prepare_output
     out = tmp_path / "out"
     out.mkdir()
     (out / "notes.txt").write_text("keep me")
@@ -87,7 +81,6 @@ def test_overwrite_moves_foreign_files_aside_never_deletes(tmp_path):
 
 
 def test_a_probreg_result_is_replaced_but_not_when_a_user_added_files(tmp_path):
-    MARKER, OutputRefused, atomic_output_dir = _output().MARKER, _output().OutputRefused, _output().atomic_output_dir
     out = tmp_path / "res"
     with atomic_output_dir(out) as tmp:
         (tmp / "angles.csv").write_text("first")
@@ -108,7 +101,6 @@ def test_a_probreg_result_is_replaced_but_not_when_a_user_added_files(tmp_path):
 
 def test_a_clip_folder_with_a_clip_json_is_not_taken_for_a_result(tmp_path):
     """Before: ``clip.json`` made any folder 'ours', so `--out` onto a user's clip deleted it."""
-    OutputRefused, prepare_output = _output().OutputRefused, _output().prepare_output
     user_clip = tmp_path / "myclip"
     (user_clip / "frames").mkdir(parents=True)
     (user_clip / "clip.json").write_text('{"fps": 50, "image_size": [64, 48]}')
@@ -277,7 +269,6 @@ def test_out_in_a_read_only_folder_is_refused_before_the_work(clip, tmp_path, ca
 
 
 def test_stale_temporaries_of_a_dead_run_are_removed_on_the_next_start(tmp_path):
-    prepare_output = _output().prepare_output
     dead = tmp_path / ".res.tmp-999999999-abc"  # no such process
     dead.mkdir()
     (dead / ".probreg-incomplete").write_text("999999999\n")
@@ -292,7 +283,6 @@ def test_stale_temporaries_of_a_dead_run_are_removed_on_the_next_start(tmp_path)
 
 
 def test_an_interrupted_run_leaves_the_previous_result_intact(clip, tmp_path, capsys, monkeypatch):
-    atomic_output_dir = _output().atomic_output_dir
     out = tmp_path / "res"
     with atomic_output_dir(out) as tmp:
         (tmp / "angles.csv").write_text("previous result")
@@ -310,7 +300,6 @@ def test_an_interrupted_run_leaves_the_previous_result_intact(clip, tmp_path, ca
 
 
 def test_a_failure_inside_the_writer_leaves_the_previous_result(tmp_path):
-    atomic_output_dir = _output().atomic_output_dir
     out = tmp_path / "res"
     with atomic_output_dir(out) as tmp:
         (tmp / "angles.csv").write_text("previous")
