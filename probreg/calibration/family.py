@@ -398,6 +398,13 @@ class FamilyParameter(ABC):
             mm = family.members(np.array([fx]))
             return float(self.values(family, np.array([fx]), mm)[0] - value)
 
+        # the coarse crossing did not survive the refinement (a member turned invalid inside the
+        # bracket, or the values there are not finite): a bracket that does not hold is no member
+        # here, not a root-finder error
+        f_lo, f_hi = fn(lo), fn(hi)
+        if not (np.isfinite(f_lo) and np.isfinite(f_hi)) or np.sign(f_lo) == np.sign(f_hi):
+            raise CalibrationError(f"no family member with {self.name} = {value:g} {self.unit} "
+                                   f"(the crossing near f = {np.exp(lo):.4g} px does not hold)")
         return float(np.exp(brentq(fn, lo, hi, xtol=1e-13, rtol=1e-13)))
 
 

@@ -157,3 +157,24 @@ def test_member_solve_hits_the_requested_height(branch):
     for h in (9.0, 13.0, 15.0):
         f = HeightParameter().focal_for(fam, h, branch=branch)
         assert abs(fam.member_at_focal(f).height_m / h - 1) < 1e-9
+
+
+def test_a_bracket_that_does_not_hold_is_no_member_not_a_scipy_error():
+    """Held-out steep near views died with scipy's "f(a) and f(b) must have different signs":
+    the coarse grid saw a crossing that the refinement (members turning invalid) lost."""
+    import numpy as np
+    import pytest
+
+    from probreg.calibration import CalibrationError, HeightParameter
+
+    class Flaky:
+        def focal_range(self):
+            f = np.array([100.0, 200.0, 400.0, 800.0])
+            return f, {"valid": np.ones(4, bool), "height_m": np.array([10.0, 20.0, 30.0, 40.0])}
+
+        def members(self, fx):
+            fx = np.atleast_1d(fx)
+            return {"valid": np.zeros(len(fx), bool), "height_m": np.full(len(fx), 10.0)}
+
+    with pytest.raises(CalibrationError, match="does not hold"):
+        HeightParameter().focal_for(Flaky(), 25.0)
