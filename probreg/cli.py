@@ -140,7 +140,7 @@ def _cmd_demo(args):
         _prepare_out(out / sub, overwrite=args.overwrite)
     cfg = config_from_preset(args.preset, args.seed, n_frames=args.frames)
     clip = synthesize(cfg, seed=args.seed, preset=args.preset)
-    clip_dir = write_clip(clip, out / "clip", images=True, jobs=args.jobs, overwrite=True)
+    clip_dir = write_clip(clip, out / "clip", images=True, jobs=args.jobs, overwrite=args.overwrite)
     clip_report(clip_dir, out / "clip_report.html")
     res = run_clip(clip_dir, out / "result", _run_options(args))
     print(f"synthetic clip: {clip_dir}\nresults and report: {out / 'result'} (report.html); "
@@ -155,6 +155,7 @@ def _parse_dist(text):
 
 def _cmd_calibrate(args):
     from .calibration.registration import DEFAULT_HEIGHT_M, camera_json, register_clip
+    from .calibration.side import requested_side
     from .io.clip import atomic_output_dir, load_clip, write_json
     from .io.frames import has_frames
 
@@ -166,14 +167,12 @@ def _cmd_calibrate(args):
     if not (height > 0):
         raise CliError(f"--height-m must be positive, got {height}")
     reg = register_clip(clip, smooth=not args.no_smooth)
+    given = requested_side(args.camera_side, clip.meta, clip.path / "clip.json")
     side = None
     if clip.keypoints_px is not None:
-        given = args.camera_side if args.camera_side != "auto" else clip.meta.get("camera_side", "auto")
-        if given not in ("auto", "main", "far"):
-            raise CliError(f"{args.clip}/clip.json: 'camera_side' must be auto, main or far, got {given!r}")
         side = reg.orient(height, clip.keypoints_px, args.branch, fps=clip.fps, given=given)
-    elif args.camera_side != "auto":
-        reg.set_camera_side(args.camera_side)
+    elif given != "auto":
+        reg.set_camera_side(given)
     cams, info = reg.cameras(height, clip.keypoints_px, clip.athlete_lane, dist=dist, branch=args.branch)
     with atomic_output_dir(args.out, overwrite=args.overwrite, inputs=[args.clip], log=print) as tmp:
         write_json(tmp / "lanes.json", {"image_size": list(clip.image_size),
@@ -186,7 +185,7 @@ def _cmd_calibrate(args):
             "frame_status": info["frame_status"], "line_offsets": info["line_offsets"],
             "consistency_m": info["consistency_m"], "dist": dist,
             "camera_side": side.to_dict() if side is not None else
-            {"chosen": "main" if reg.forward_px[0] > 0 else "far", "source": "given" if args.camera_side != "auto"
+            {"chosen": "main" if reg.forward_px[0] > 0 else "far", "source": "given" if given != "auto"
              else "default (no keypoints to decide by)"}})
     n_ok = sum(c is not None for c in cams)
     if n_ok == 0:

@@ -29,6 +29,7 @@ import numpy as np
 
 from .analysis import GAIT_FIELDS
 from .calibration.registration import camera_json, register_clip
+from .calibration.side import requested_side
 from .geometry import JOINT_NAMES
 from .inference import ModelPriors, angle_bands, gait_intervals
 from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, SamplerSettings
@@ -172,9 +173,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
     if seen < 10:
         raise ValueError(f"{clip_dir}: only {seen} frames have a detected athlete (at least 8 joints); "
                          f"the model needs at least 10")
-    given = options.camera_side if options.camera_side != "auto" else clip.meta.get("camera_side", "auto")
-    if given not in ("auto", "main", "far"):
-        raise ClipFormatError(f"{clip.path / 'clip.json'}: 'camera_side' must be auto, main or far, got {given!r}")
+    given = requested_side(options.camera_side, clip.meta, clip.path / "clip.json")
     reg = register_clip(clip)
     t1 = time.perf_counter()
     log(f"lanes: {reg.status_counts()} ({t1 - t0:.1f} s)")

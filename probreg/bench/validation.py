@@ -106,12 +106,11 @@ def _run_cli(clip: Path, out: Path, extra=()):
     return proc.returncode, dt, (err[-1] if err else "")
 
 
-def _heldout_clips(args):
-    """The held-out clips (written to ``--heldout-dir`` when missing, else to a temporary folder)."""
+def _heldout_clips(root):
+    """The held-out clips under ``root`` (written there when missing)."""
     from ..sim.heldout import HELDOUT_SEEDS, heldout_config, write_heldout
 
-    given = getattr(args, "heldout_dir", None)
-    root = Path(given) if given else Path(tempfile.mkdtemp(prefix="probreg-heldout-"))
+    root = Path(root)
     names = []
     for seed in HELDOUT_SEEDS:
         _, kind, far = heldout_config(seed)
@@ -224,9 +223,16 @@ def run(args=None):
         else:
             sets.append(("validation clips (independent generator)", peer_knee_errors(vdir / "README.md"),
                          sorted(p for p in vdir.iterdir() if (p / "clip.json").exists())))
-    if which in ("heldout", "all"):
-        sets.append(("held-out set (probreg's generator, 40 randomised set-ups, seeds fixed before tuning; "
-                     "100 frames each; no peer numbers)", {}, _heldout_clips(args)))
+    with tempfile.TemporaryDirectory(prefix="probreg-heldout-") as scratch:
+        if which in ("heldout", "all"):
+            sets.append(("held-out set (probreg's generator, 40 randomised set-ups, seeds fixed before tuning; "
+                         "100 frames each; no peer numbers)", {},
+                         _heldout_clips(getattr(args, "heldout_dir", None) or scratch)))
+        _run_sets(rep, sets, only)
+    return rep
+
+
+def _run_sets(rep, sets, only):
     for title, peer, clips in sets:
         if only:
             clips = [c for c in clips if c.name in set(only.split(","))]
@@ -241,4 +247,3 @@ def run(args=None):
         rep.add(f"### Targets (issue 25) on the {title.split(' (')[0]}\n")
         rep.add(md_table(["target", "wanted", "measured", "met"],
                          [[a, b, c, "yes" if d else "**no**"] for a, b, c, d in _targets(summary)]))
-    return rep

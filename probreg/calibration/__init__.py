@@ -23,7 +23,6 @@ from .registration import (
     lane_anchor_shift,
     register_clip,
     register_frames,
-    running_sign,
     undistorted_members,
 )
 from .side import SIDES, CameraSide, camera_side_evidence
@@ -33,5 +32,5 @@ __all__ = [
     "FamilyMember", "CalibrationFamily", "FamilyParameter", "HeightParameter", "FovParameter",
     "AzimuthParameter", "PARAMETERS", "SequenceCalibration", "CalibrationError",
     "DEFAULT_HEIGHT_M", "ANKLE_HEIGHT_M", "ClipRegistration", "athlete_ground_track",
-    "running_sign", "lane_anchor_shift", "register_frames", "register_clip", "undistorted_members",
+    "lane_anchor_shift", "register_frames", "register_clip", "undistorted_members",
 ]

@@ -26,7 +26,7 @@ from ..lanes import (
 from .side import camera_side_evidence, forward_px_of
 from .family import CalibrationError, CalibrationFamily, SequenceCalibration
 
-__all__ = ["DEFAULT_HEIGHT_M", "ANKLE_HEIGHT_M", "ClipRegistration", "athlete_ground_track", "running_sign", "lane_anchor_shift", "register_frames", "register_clip", "undistorted_members"]
+__all__ = ["DEFAULT_HEIGHT_M", "ANKLE_HEIGHT_M", "ClipRegistration", "athlete_ground_track", "lane_anchor_shift", "register_frames", "register_clip", "undistorted_members"]
 
 
 #: Height used when none is given and no posterior is available: the median of
@@ -78,18 +78,6 @@ def lane_anchor_shift(ground_track_m, athlete_lane=None, lane_width_m=1.22):
     y = float(np.median(ground_track_m[ok, 1]))
     lane = athlete_lane if athlete_lane is not None else int(np.floor(-y / w)) + 1
     return int(np.round((y + w * (lane - 0.5)) / w))
-
-
-def running_sign(cameras, keypoints_px):
-    """+1 if the athlete moves along +x of these cameras over the clip, -1 if along -x,
-    0 if it cannot be told (the camera is static, so ``x`` over time is meaningful)."""
-    g = athlete_ground_track(cameras, keypoints_px)
-    ok = np.all(np.isfinite(g), -1)
-    if ok.sum() < 5:
-        return 0
-    t = np.flatnonzero(ok)
-    slope = np.polyfit(t, g[ok, 0], 1)[0]
-    return int(np.sign(slope))
 
 
 #: Camera heights (m) at which :func:`glitch_vote` asks whether a frame is off the zoom path.
@@ -241,7 +229,8 @@ class ClipRegistration:
             self.set_camera_side("main")
         seq = self.sequence
         seq.branch = branch
-        seq.line_offsets = self.track_offsets(seq, height_m)
+        # line offsets only shift cameras and cast points across the track together: the
+        # along-track motion the side is read from does not depend on them
         ground = athlete_ground_track(seq.cameras_at_height(height_m), keypoints_px)
         side = camera_side_evidence(ground, keypoints_px, fps, given=given)
         self.set_camera_side(side.chosen)

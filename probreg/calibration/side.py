@@ -34,13 +34,33 @@ import numpy as np
 
 from ..geometry import JOINT_INDEX
 
-__all__ = ["CameraSide", "SIDES", "MIN_LOG_RATIO", "camera_side_evidence", "forward_px_of"]
+__all__ = ["CameraSide", "SIDES", "MIN_LOG_RATIO", "camera_side_evidence", "forward_px_of", "requested_side"]
 
 #: the two hypotheses
 SIDES = ("main", "far")
 #: a side chosen with a smaller log-evidence ratio (20:1) is not trusted by the clip verdict
 MIN_LOG_RATIO = float(np.log(20.0))
 _CAP = 200.0  # cap on one cue's log-likelihood ratio (keeps the numbers readable; never decisive alone)
+
+
+def requested_side(option, clip_meta, where="clip.json"):
+    """The side the user asks for: the command-line option unless it is ``"auto"``, else
+    ``clip.json``'s ``"camera_side"``, else ``"auto"``.
+
+    Raises
+    ------
+    ValueError
+        If ``clip.json`` names another side (``where`` says which file).
+
+    >>> requested_side("auto", {"camera_side": "far"})
+    'far'
+    >>> requested_side("main", {"camera_side": "far"})
+    'main'
+    """
+    given = option if option != "auto" else clip_meta.get("camera_side", "auto")
+    if given not in ("auto",) + SIDES:
+        raise ValueError(f"{where}: 'camera_side' must be auto, main or far, got {given!r}")
+    return given
 
 
 def forward_px_of(side):

@@ -268,8 +268,8 @@ def _check_number(meta, key, path, lo, hi, what):
     return v
 
 
-def _actual_image_size(path: Path, frame_paths, video):
-    """(W, H) of the first readable frame, or None."""
+def _actual_image_size(frame_paths, video):
+    """``((W, H), source path)`` of the video or the first readable frame, or None."""
     import cv2
 
     if video is not None:
@@ -372,7 +372,7 @@ def load_clip(path, min_score=0.0):
         notes.append(f"{frame_dir}: no image for {len(missing)} of {n} frames (first: frame {missing[0]}); "
                      f"their status is missing_image")
     video = path / "video.mp4"
-    actual = _actual_image_size(path, frame_paths, video if (not frame_paths and video.exists()) else None)
+    actual = _actual_image_size(frame_paths, video if (not frame_paths and video.exists()) else None)
     if actual is not None and tuple(actual[0]) != (w, h):
         (aw, ah), src = actual
         raise ClipFormatError(f"{cj}: 'image_size' is [{w}, {h}] but {src} is {aw}x{ah} pixels "

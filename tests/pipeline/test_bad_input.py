@@ -330,3 +330,13 @@ def test_missing_clip_and_missing_keypoints(clip, tmp_path, capsys):
 def test_debug_shows_the_traceback(tmp_path):
     with pytest.raises(ClipFormatError):
         main(["--debug", "run", str(tmp_path / "nope"), "--out", str(tmp_path / "o")])
+
+
+def test_an_unknown_camera_side_in_clip_json_is_a_clear_error(clip, tmp_path, capsys):
+    doc = json.loads((clip / "clip.json").read_text())
+    doc["camera_side"] = "left"
+    (clip / "clip.json").write_text(json.dumps(doc))
+    assert main(["run", str(clip), "--out", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, "clip.json", "'camera_side' must be auto, main or far")
+    assert main(["calibrate", str(clip), "--out", str(tmp_path / "c")]) == 2
+    _one_error_line(capsys, "clip.json", "camera_side")
