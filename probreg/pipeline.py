@@ -32,7 +32,7 @@ from .calibration.registration import camera_json, register_clip
 from .calibration.side import requested_side
 from .geometry import JOINT_NAMES
 from .inference import ModelPriors, angle_bands, gait_intervals
-from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, SamplerSettings
+from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationError, SamplerSettings
 from .inference.verdict import bone_length_cv, clip_verdict
 from .io.clip import ClipFormatError, load_clip, write_json
 from .io.frames import has_frames
@@ -64,7 +64,7 @@ class RunOptions:
 @dataclass
 class RunResult:
     out_dir: Path
-    model: ClipModel
+    model: ClipModel | None
     posterior: object
     angle_summary: dict
     height: dict
@@ -150,6 +150,40 @@ def _frame_status(lanes, camera, inconsistent, gap_distance):
     return "ok" if gap_distance == 0 else "bridged_no_member"
 
 
+def _write_uncalibrated(clip, reg, side, out_dir, options, message, t0, log):
+    """The result folder of a clip no frame of which calibrates: every file of the layout, with
+    NaN angles and joints, null cameras, the lane status of every frame and the verdict
+    ``"uncalibrated"`` (nothing is estimated without a camera)."""
+    from .geometry import ANGLE_NAMES
+
+    out_dir = Path(out_dir)
+    F = clip.n_frames
+    counts = reg.status_counts()
+    reasons = [f"calibrated_frames 0/{F}", f"frames_with_angles 0/{F}"] + [
+        f"lanes {k} {v}/{F}" for k, v in sorted(counts.items(), key=lambda kv: -kv[1])]
+    status = [fl.status for fl in reg.frame_lanes]
+    timings = {"total_s": time.perf_counter() - t0}
+    nan = np.full(F, np.nan)
+    summ = {k: (nan, nan, nan) for k in ANGLE_NAMES}
+    with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=[clip.path], log=log) as tmp:
+        write_angles_csv(tmp / "angles.csv", clip.fps, {k: nan for k in ANGLE_NAMES})
+        write_joints_npz(tmp / "joints3d.npz", np.full((F, len(JOINT_NAMES), 3), np.nan))
+        write_json(tmp / "camera.json", camera_json([None] * F, float("nan"), F))
+        write_json(tmp / "run.json", {"verdict": "uncalibrated", "verdict_reasons": reasons, "error": message,
+                                     "camera_side": side.to_dict(), "input_notes": list(clip.notes),
+                                     "timings_s": timings, "frame_status": status,
+                                     "lane_status_counts": counts})
+        result = RunResult(out_dir=out_dir, model=None, posterior=None, angle_summary=summ, height={},
+                           gait={}, diagnostics={}, timings=timings, verdict="uncalibrated",
+                           verdict_reasons=tuple(reasons), camera_side=side)
+        if options.report:
+            from .report.html import uncalibrated_report
+
+            uncalibrated_report(tmp / "report.html", clip, reg, result)
+    log(f"uncalibrated: {message}; lane statuses {counts}")
+    return result
+
+
 def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
     """Run the full pipeline on a clip folder and write the result folder.
 
@@ -158,7 +192,10 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
     ClipFormatError
         For a missing or malformed clip, a clip without frames or without keypoints.
     ValueError
-        When no frame shows lanes of the straight.
+        When the options do not fit the clip (e.g. a camera-height prior outside what the lanes allow).
+
+    A clip no frame of which calibrates (no lanes of the straight anywhere) is not an error: its
+    result folder is written with verdict ``"uncalibrated"``, NaN angles and every frame's lane status.
     """
     t0 = time.perf_counter()
     prepare_output(out_dir, inputs=[clip_dir], overwrite=options.overwrite)  # before any work
@@ -180,8 +217,11 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
     side = reg.orient(options.priors.camera_height.centre(), clip.keypoints_px, options.branch, fps=clip.fps,
                       given=given)
     log(f"camera side: {side.chosen} ({side.source}; log-evidence ratio {side.log_ratio:.1f})")
-    model = ClipModel(reg, clip.keypoints_px, clip.fps, clip.athlete_lane, priors=options.priors,
-                      dist=options.dist, branch=options.branch)
+    try:
+        model = ClipModel(reg, clip.keypoints_px, clip.fps, clip.athlete_lane, priors=options.priors,
+                          dist=options.dist, branch=options.branch)
+    except NoCalibrationError as exc:
+        return _write_uncalibrated(clip, reg, side, out_dir, options, str(exc), t0, log)
     sampler, tau = model.sample(options.sampler)
     chain = sampler.get_chain()  # (steps, walkers, D)
     flat = chain.reshape(-1, chain.shape[-1])

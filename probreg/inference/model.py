@@ -66,7 +66,13 @@ from .bands import stance_window
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
 from .propagation import DrawPropagation, _default_workers, _fork_map
 
-__all__ = ["ClipModel", "SamplerSettings", "PARAM_NAMES", "STILLNESS_SYS_SD"]
+__all__ = ["ClipModel", "SamplerSettings", "PARAM_NAMES", "STILLNESS_SYS_SD", "NoCalibrationError"]
+
+
+class NoCalibrationError(ValueError):
+    """No frame of the clip has a usable calibration family (no lanes of the straight found):
+    the clip cannot be calibrated (:func:`probreg.pipeline.run_clip` writes an ``"uncalibrated"``
+    result)."""
 
 
 #: Systematic sd of the planted-foot slide (fraction of the running speed) at the true
@@ -148,7 +154,7 @@ class ClipModel(DrawPropagation):
         self.max_gap_frames = 25
         self._build_branches()
         if not self.valid.any():
-            raise ValueError("no frame has a usable calibration family (no lanes found)")
+            raise NoCalibrationError("no frame has a usable calibration family (no lanes found)")
         lo, hi = self.height_range
         plo, phi = priors.camera_height.interval(0.998)
         g_lo, g_hi = max(lo, plo), min(hi, phi)

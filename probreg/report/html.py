@@ -12,7 +12,7 @@ import numpy as np
 
 from ..geometry import BONES, JOINT_INDEX, joint_angles
 
-__all__ = ["HtmlReport", "draw_skeleton", "clip_report"]
+__all__ = ["HtmlReport", "draw_skeleton", "clip_report", "run_report", "uncalibrated_report"]
 
 
 _CSS = """body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;color:#222}
@@ -246,4 +246,33 @@ def run_report(out_html, clip, result, joints_median, cameras):
                   "noise level estimated in this clip). Not included: errors of the lane-line detection "
                   "beyond the per-frame fit, systematic detector bias, and model errors of the lifting.",
                   cls="note")
+    return rep.save(out_html)
+
+
+def uncalibrated_report(out_html, clip, registration, result):
+    """Report of a clip no frame of which calibrated: the verdict, the lane status of the frames
+    and a few frames with the line candidates that were found, so that the user sees why."""
+    from ..lanes import draw_lanes
+
+    rep = HtmlReport(f"probreg: {Path(str(clip.path)).name}")
+    rep.paragraph("Verdict: uncalibrated. " + "; ".join(result.verdict_reasons)
+                  + ". No frame gave a camera, so nothing was estimated: the angle and joint files hold NaN "
+                  "(run.json lists every frame's lane status).", cls="banner")
+    rep.heading("Lane status of the frames")
+    counts = registration.status_counts()
+    rep.table(["status", "frames"], [[k, v] for k, v in sorted(counts.items(), key=lambda kv: -kv[1])],
+              fmt="{:.0f}")
+    rep.paragraph("Lane lines of the straight are needed in at least one frame: a vanishing point and the "
+                  "1.22 m spacing of three or more lines. A camera too low above the track (grazing view) "
+                  "squeezes the far lines together until they merge; a frame without the straight's lines "
+                  "(curve, close-up) has nothing to measure.", cls="note")
+    if clip.frame_paths:
+        n = len(clip.frame_paths)
+        for i in sorted({0, n // 2, n - 1}):
+            img = cv2.imread(str(clip.frame_paths[i]))
+            if img is None:
+                continue
+            fl = registration.frame_lanes[i]
+            rep.image(draw_lanes(img, fl), f"frame {i}: lane status {fl.status}, {len(fl.lines)} line(s) drawn",
+                      max_width=640)
     return rep.save(out_html)

@@ -14,6 +14,7 @@ import pytest
 
 from probreg.cli import main
 from probreg.io import ClipFormatError, load_clip
+from probreg.io.results import read_angles_csv
 from probreg.io.output import MARKER, OutputRefused, atomic_output_dir, prepare_output
 
 FAST_RUN = ["--walkers", "20", "--max-steps", "300", "--draws", "8", "--seed", "1"]
@@ -237,6 +238,28 @@ def test_calibrate_with_no_frame_calibrated_is_a_failure(clip, tmp_path, capsys)
     err = capsys.readouterr().err
     assert "calibrated 0/40 frames" in err and "Traceback" not in err
     assert (out / "calibration.json").exists()  # written for inspection
+
+
+def test_run_with_no_frame_calibrated_writes_an_uncalibrated_result(clip, tmp_path, capsys):
+    blank = np.full((1080, 1920, 3), 90, np.uint8)
+    for p in (clip / "frames").glob("*.jpg"):
+        cv2.imwrite(str(p), blank)
+    out = tmp_path / "res"
+    assert main(["run", str(clip), "--out", str(out)]) == 3
+    err = capsys.readouterr().err
+    assert "uncalibrated" in err and "Traceback" not in err
+    run = json.loads((out / "run.json").read_text())
+    assert run["verdict"] == "uncalibrated"
+    assert run["verdict_reasons"][:2] == ["calibrated_frames 0/40", "frames_with_angles 0/40"]
+    assert "lanes no_lines 40/40" in run["verdict_reasons"]
+    assert run["frame_status"] == ["no_lines"] * 40
+    # the whole layout is there, with nothing estimated
+    ang = read_angles_csv(out / "angles.csv")
+    assert np.all(np.isnan(ang["knee_l"][1])) and len(ang["knee_l"][1]) == 40
+    assert np.load(out / "joints3d.npz")["median"].shape == (40, 17, 3)
+    assert np.all(np.isnan(np.load(out / "joints3d.npz")["median"]))
+    assert all(f["K"] is None for f in json.loads((out / "camera.json").read_text())["frames"])
+    assert "Verdict: uncalibrated" in (out / "report.html").read_text(encoding="utf-8")
 
 
 # ----------------------------------------------------------------------------- 6. late checks, leftovers, interrupts
