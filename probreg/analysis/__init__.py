@@ -8,12 +8,13 @@ from .kinematics import (
     cycle_curves,
     gait_cycles,
     gait_summary,
+    mean_cycle_curve,
     normalise_cycle,
     step_time_s,
     touchdowns,
 )
 
 __all__ = [
-    "touchdowns", "gait_cycles", "normalise_cycle", "cycle_curves", "gait_summary", "GAIT_FIELDS",
+    "touchdowns", "gait_cycles", "normalise_cycle", "cycle_curves", "mean_cycle_curve", "gait_summary", "GAIT_FIELDS",
     "step_time_s",
 ]

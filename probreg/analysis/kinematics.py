@@ -12,7 +12,8 @@ import numpy as np
 
 from ..lifting.trajectory import _runs
 
-__all__ = ["touchdowns", "gait_cycles", "normalise_cycle", "cycle_curves", "gait_summary", "GAIT_FIELDS", "step_time_s"]
+__all__ = ["touchdowns", "gait_cycles", "normalise_cycle", "cycle_curves", "mean_cycle_curve", "gait_summary",
+           "GAIT_FIELDS", "step_time_s"]
 
 
 #: Gait-level numbers running studies report, with units.
@@ -58,6 +59,31 @@ def cycle_curves(signal, contact, n_points=101):
     if not cyc:
         return np.zeros((0, n_points))
     return np.stack([normalise_cycle(signal, a, b, n_points) for a, b in cyc])
+
+
+def mean_cycle_curve(signal, contact, n_points=101, max_missing=0.2):
+    """Mean over the complete cycles of ``signal`` (touchdown to touchdown of ``contact``), each
+    normalised to ``n_points``; NaN when the clip has no usable cycle.
+
+    A cycle with more than ``max_missing`` of its frames missing (NaN) is left out; shorter gaps
+    are bridged linearly before the cycle is resampled.
+
+    >>> c = np.zeros(41, bool); c[[0, 20, 40]] = True
+    >>> x = np.sin(np.linspace(0, 4 * np.pi, 41))
+    >>> bool(np.allclose(mean_cycle_curve(x, c, 5), [0, 1, 0, -1, 0], atol=1e-9))
+    True
+    """
+    s = np.asarray(signal, float)
+    curves = []
+    for a, b in gait_cycles(contact):
+        seg = s[a:b + 1]
+        ok = np.isfinite(seg)
+        if ok.sum() < 2 or 1.0 - ok.mean() > max_missing:
+            continue
+        t = np.arange(len(seg))
+        seg = np.interp(t, t[ok], seg[ok])
+        curves.append(normalise_cycle(seg, 0, len(seg) - 1, n_points))
+    return np.mean(curves, axis=0) if curves else np.full(n_points, np.nan)
 
 
 def step_time_s(touchdown_frames, fps):

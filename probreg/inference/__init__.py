@@ -12,6 +12,8 @@ from .bands import (
     STANCE_WINDOW,
     angle_bands,
     angle_curvature,
+    GAIT_CYCLE_ANGLES,
+    gait_cycle_bands,
     gait_intervals,
     stance_window,
 )
@@ -29,5 +31,5 @@ __all__ = [
     "Prior", "NormalPrior", "LogNormalPrior", "ModelPriors", "SEGMENT_PROPORTIONS", "angle_bands",
     "STANCE_WINDOW", "stance_window", "BAND_SCALE", "angle_curvature", "gait_intervals",
     "GAIT_BAND_SCALE", "NONNEGATIVE_GAIT_SUFFIXES", "ClipModel", "SamplerSettings", "PARAM_NAMES",
-    "STILLNESS_SYS_SD", "BAND_CURVATURE_S2",
+    "STILLNESS_SYS_SD", "BAND_CURVATURE_S2", "GAIT_CYCLE_ANGLES", "gait_cycle_bands",
 ]

@@ -9,7 +9,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["BAND_CURVATURE_S2", "angle_bands", "STANCE_WINDOW", "stance_window", "BAND_SCALE", "angle_curvature", "gait_intervals", "GAIT_BAND_SCALE", "NONNEGATIVE_GAIT_SUFFIXES"]
+__all__ = ["BAND_CURVATURE_S2", "angle_bands", "STANCE_WINDOW", "stance_window", "BAND_SCALE", "angle_curvature", "gait_intervals", "GAIT_BAND_SCALE", "NONNEGATIVE_GAIT_SUFFIXES",
+           "GAIT_CYCLE_ANGLES", "gait_cycle_bands"]
 
 #: Curvature weight (s^2) of the bands of the cross-stride smoothed angles: the smoothing's bias
 #: grows with the curvature of the angle curve (about half the squared smoothing time times the
@@ -149,4 +150,54 @@ def gait_intervals(gait_point, gait_noisy, lo=5.0, hi=95.0, inflation=None):
             if name.endswith(NONNEGATIVE_GAIT_SUFFIXES):
                 low = max(low, 0.0)
             out[name] = (med, low, med + k * (np.nanpercentile(w, hi) - c))
+    return out
+
+
+#: Angles of the gait-cycle curves: (angle, side) -> the angle series; side "L"/"R" also picks the
+#: foot whose touchdowns delimit the cycle (the elbows' cycle is that of the same-side foot).
+GAIT_CYCLE_ANGLES = {("knee", "L"): "knee_l", ("knee", "R"): "knee_r", ("hip", "L"): "hip_l",
+                     ("hip", "R"): "hip_r", ("elbow", "L"): "elbow_l", ("elbow", "R"): "elbow_r"}
+
+
+def gait_cycle_bands(angles_point, angles_noisy, contacts, n_points=101, lo=5.0, hi=95.0, inflation=None):
+    """Angle curves over the gait cycle (0-100 %, touchdown to touchdown of the same foot), with
+    credible bands over posterior draws.
+
+    For every draw, each angle is normalised over each complete cycle of its side's foot
+    (``contacts`` (F, 2), ``[left, right]``, detected once for the clip) and averaged over the
+    cycles: the band is the spread of that mean curve over the draws (the uncertainty of the
+    athlete's typical cycle), not the cycle-to-cycle variation.  As in :func:`angle_bands`, the
+    median is that of the point liftings and each side of the band the bootstrap draws'
+    deviation from their own median, scaled by the angle family's :data:`BAND_SCALE` (or by
+    ``inflation``).
+
+    Returns
+    -------
+    dict (angle, side) -> (cycle_pct (n,), median (n,), lo (n,), hi (n,), n_cycles)
+        Only pairs with at least one complete cycle; NaN where no draw had a usable cycle.
+    """
+    import warnings
+
+    from ..analysis import gait_cycles, mean_cycle_curve
+
+    c = np.asarray(contacts, bool)
+    pct = np.linspace(0.0, 100.0, n_points)
+    out = {}
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        for (angle, side), name in GAIT_CYCLE_ANGLES.items():
+            if name not in angles_point:
+                continue
+            contact = c[:, 0 if side == "L" else 1]
+            n_cyc = len(gait_cycles(contact))
+            if n_cyc == 0:
+                continue
+            pts = np.array([mean_cycle_curve(a, contact, n_points) for a in np.atleast_2d(angles_point[name])])
+            noisy = np.array([mean_cycle_curve(a, contact, n_points) for a in np.atleast_2d(angles_noisy[name])])
+            med = np.nanmedian(pts, 0)
+            centre = np.nanmedian(noisy, 0)
+            k = float(inflation) if inflation is not None else BAND_SCALE.get(angle, max(BAND_SCALE.values()))
+            lo_c = med - k * (centre - np.nanpercentile(noisy, lo, 0))
+            hi_c = med + k * (np.nanpercentile(noisy, hi, 0) - centre)
+            out[(angle, side)] = (pct, med, lo_c, hi_c, n_cyc)
     return out

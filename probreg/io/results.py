@@ -10,7 +10,7 @@ import numpy as np
 from ..geometry import ANGLE_NAMES, JOINT_NAMES
 from .clip import ClipFormatError
 
-__all__ = ["write_angles_csv", "read_angles_csv", "write_joints_npz"]
+__all__ = ["write_angles_csv", "read_angles_csv", "write_joints_npz", "write_gait_cycle_csv", "read_gait_cycle_csv"]
 
 
 def write_angles_csv(path, fps, median, lo=None, hi=None, frames=None):
@@ -70,3 +70,40 @@ def write_joints_npz(path, median, samples=None, **extra):
     arrays.update({k: np.asarray(v) for k, v in extra.items()})
     np.savez_compressed(path, **arrays)
     return Path(path)
+
+
+GAIT_CYCLE_HEADER = ["angle", "side", "cycle_pct", "median_deg", "lo_deg", "hi_deg"]
+
+
+def write_gait_cycle_csv(path, curves):
+    """``gait_cycle.csv``: ``angle,side,cycle_pct,median_deg,lo_deg,hi_deg``, one row per angle,
+    side (``L``/``R``) and cycle percentage.
+
+    Parameters
+    ----------
+    curves : dict (angle, side) -> (cycle_pct, median, lo, hi[, n_cycles])
+        As :func:`probreg.inference.gait_cycle_bands` returns them.
+    """
+    with open(path, "w", newline="", encoding="utf-8") as fh:
+        w = csv.writer(fh)
+        w.writerow(GAIT_CYCLE_HEADER)
+        for (angle, side), (pct, med, lo, hi, *_) in curves.items():
+            for p, m, a, b in zip(pct, med, lo, hi):
+                w.writerow([angle, side, f"{p:.1f}", f"{m:.3f}", f"{a:.3f}", f"{b:.3f}"])
+    return Path(path)
+
+
+def read_gait_cycle_csv(path):
+    """Read ``gait_cycle.csv`` into ``{(angle, side): (cycle_pct, median, lo, hi)}`` arrays."""
+    rows = {}
+    try:
+        with open(path, newline="", encoding="utf-8") as fh:
+            r = csv.reader(fh)
+            header = next(r, None)
+            if header != GAIT_CYCLE_HEADER:
+                raise ClipFormatError(f"{path}: header {header} is not {GAIT_CYCLE_HEADER}")
+            for line in r:
+                rows.setdefault((line[0], line[1]), []).append([float(v) for v in line[2:6]])
+    except (OSError, ValueError, IndexError) as exc:
+        raise ClipFormatError(f"{path}: cannot read gait-cycle curves ({exc})") from None
+    return {k: tuple(np.array(v).T) for k, v in rows.items()}

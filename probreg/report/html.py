@@ -12,7 +12,8 @@ import numpy as np
 
 from ..geometry import BONES, JOINT_INDEX, joint_angles
 
-__all__ = ["HtmlReport", "draw_skeleton", "clip_report", "run_report", "uncalibrated_report"]
+__all__ = ["HtmlReport", "draw_skeleton", "clip_report", "run_report", "uncalibrated_report", "gait_cycle_figure",
+           "prior_posterior_figure", "status_strip_figure", "sampler_figure"]
 
 
 _CSS = """body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;color:#222}
@@ -213,6 +214,13 @@ def run_report(out_html, clip, result, joints_median, cameras):
                      float(np.percentile(v, 95))])
     rep.table(["quantity", "median", "5 %", "95 %"], rows, fmt="{:.3f}")
     rep.paragraph(scale_note(result.model.priors.stature, post["stature"].values.ravel()), cls="note")
+    rep.figure(prior_posterior_figure(result.model.priors, post), "Prior (grey) and posterior (blue) of the "
+               "athlete's stature and the camera height: where the posterior is as wide as the prior, the clip "
+               "did not measure the quantity")
+    if getattr(result, "frame_status", None):
+        rep.figure(status_strip_figure(result.frame_status, clip.fps), "Per-frame status (run.json frame_status)")
+    rep.figure(sampler_figure(result.posterior), "Sampler diagnostics (ArviZ): trace and rank plots of the log "
+               "camera height and the stature, one line per walker; flat rank histograms mean the walkers mixed")
     rep.paragraph(f"emcee: {d['walkers']} walkers x {d['steps']} steps, acceptance "
                   f"{d['acceptance_fraction']:.2f}, max integrated autocorrelation time "
                   f"{max(d['tau'].values()):.0f} steps ({d['steps_per_tau']:.0f} tau), ESS(height) "
@@ -228,6 +236,10 @@ def run_report(out_html, clip, result, joints_median, cameras):
         ax.legend(loc="upper right", fontsize=8)
     axes[-1].set_xlabel("time (s)")
     rep.figure(fig, "Joint angles with 90 % credible bands (calibration, limb lengths and detector noise)")
+    if getattr(result, "gait_cycle", None):
+        rep.figure(gait_cycle_figure(result.gait_cycle),
+                   "Joint angles over the gait cycle (touchdown to touchdown of the same foot, 0-100 %; mean over "
+                   "the clip's cycles), posterior median with its 90 % credible band over draws (gait_cycle.csv)")
     rep.heading("Gait")
     rep.table(["quantity", "median", "5 %", "95 %", "unit"],
               [[k, v["median"], v["lo"], v["hi"], GAIT_FIELDS.get(k, "")] for k, v in result.gait.items()])
@@ -239,6 +251,23 @@ def run_report(out_html, clip, result, joints_median, cameras):
             if clip.keypoints_px is not None:
                 draw_skeleton(img, clip.keypoints_px[mid], (0, 200, 255), 1)
             rep.image(img, f"frame {mid}: posterior-median 3D skeleton re-projected (green), keypoints (orange)")
+    if clip.frame_paths and getattr(result, "model", None) is not None:
+        from ..lanes import draw_lanes
+
+        n = len(clip.frame_paths)
+        thumbs = []
+        for i in sorted({0, n // 3, 2 * n // 3, n - 1}):
+            img = cv2.imread(str(clip.frame_paths[i]))
+            if img is not None:
+                fl = result.model.reg.frame_lanes[i]
+                thumbs.append(cv2.resize(draw_lanes(img, fl), (480, int(480 * img.shape[0] / img.shape[1]))))
+        if thumbs:
+            h = max(t.shape[0] for t in thumbs)
+            grid = [np.pad(t, ((0, h - t.shape[0]), (0, 0), (0, 0))) for t in thumbs]
+            rows = [np.hstack(grid[k:k + 2] + [np.zeros_like(grid[0])] * (2 - len(grid[k:k + 2])))
+                    for k in range(0, len(grid), 2)]
+            rep.image(np.vstack(rows), "Lane lines found in a few frames (the lines the calibration used)",
+                      max_width=960)
     rep.heading("Timing")
     rep.table(["stage", "seconds"], [[k, v] for k, v in result.timings.items()])
     rep.paragraph("Uncertainty sources in the bands: the camera height (the one calibration degree of "
@@ -276,3 +305,101 @@ def uncalibrated_report(out_html, clip, registration, result):
             rep.image(draw_lanes(img, fl), f"frame {i}: lane status {fl.status}, {len(fl.lines)} line(s) drawn",
                       max_width=640)
     return rep.save(out_html)
+
+
+def gait_cycle_figure(curves):
+    """Knee, hip and elbow over the gait cycle, left and right, with bands (a matplotlib figure)."""
+    import matplotlib.pyplot as plt
+
+    angles = [a for a in ("knee", "hip", "elbow") if any(k[0] == a for k in curves)]
+    fig, axes = plt.subplots(1, max(1, len(angles)), figsize=(4.2 * max(1, len(angles)), 3.6), squeeze=False)
+    for ax, angle in zip(axes[0], angles):
+        for side, col in (("L", "tab:blue"), ("R", "tab:orange")):
+            if (angle, side) not in curves:
+                continue
+            pct, med, lo, hi, *rest = curves[(angle, side)]
+            n = f", {rest[0]} cycles" if rest else ""
+            ax.fill_between(pct, lo, hi, color=col, alpha=0.25, lw=0)
+            ax.plot(pct, med, color=col, label=f"{side}{n}")
+        ax.set_title(f"{angle} flexion")
+        ax.set_xlabel("gait cycle (%)")
+        ax.set_ylabel("deg")
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+def prior_posterior_figure(priors, posterior):
+    """Prior and posterior densities of the stature and the camera height."""
+    import matplotlib.pyplot as plt
+
+    fig, axes = plt.subplots(1, 2, figsize=(10, 3.2))
+    for ax, prior, var, label in ((axes[0], priors.stature, "stature", "stature (m)"),
+                                  (axes[1], priors.camera_height, "height_m", "camera height (m)")):
+        draws = np.asarray(posterior[var]).ravel()
+        lo, hi = prior.interval(0.99)
+        lo, hi = min(lo, np.percentile(draws, 0.5)), max(hi, np.percentile(draws, 99.5))
+        log = var == "height_m"  # the camera height on a log axis (its prior is log-normal)
+        x = np.geomspace(lo, hi, 400) if log else np.linspace(lo, hi, 400)
+        dens = np.exp(prior.logpdf(x)) * (x if log else 1.0)  # density per log unit on the log axis
+        u = np.log(x) if log else x
+        ax.fill_between(x, dens / (dens.sum() * (u[1] - u[0])), color="0.6", alpha=0.5, lw=0, label="prior")
+        bins = np.geomspace(lo, hi, 61) if log else np.linspace(lo, hi, 61)
+        w = np.full(len(draws), 1.0 / (len(draws) * (np.log(bins[1] / bins[0]) if log else bins[1] - bins[0])))
+        ax.hist(draws, bins=bins, weights=w, color="tab:blue", alpha=0.7, label="posterior")
+        if log:
+            ax.set_xscale("log")
+        ax.set_xlabel(label)
+        ax.set_yticks([])
+        ax.legend(fontsize=8)
+    fig.tight_layout()
+    return fig
+
+
+#: colours of the status strip: ok, bridged (camera interpolated), no camera
+_STATUS_COLOURS = {"ok": (0.2, 0.65, 0.2), "bridged": (0.95, 0.7, 0.1), "none": (0.8, 0.15, 0.15)}
+
+
+def status_strip_figure(frame_status, fps):
+    """One coloured cell per frame: calibrated (green), bridged (orange), no camera (red)."""
+    import matplotlib.pyplot as plt
+    from matplotlib.patches import Patch
+
+    def kind(s):
+        return "ok" if s == "ok" else ("bridged" if s.startswith("bridged") else "none")
+
+    kinds = [kind(s) for s in frame_status]
+    rgb = np.array([[_STATUS_COLOURS[k] for k in kinds]])
+    fig, ax = plt.subplots(figsize=(10, 1.1))
+    ax.imshow(rgb, aspect="auto", extent=(0, len(kinds) / fps, 0, 1), interpolation="nearest")
+    ax.set_yticks([])
+    ax.set_xlabel("time (s)")
+    counts = {k: kinds.count(k) for k in _STATUS_COLOURS}
+    labels = {"ok": "calibrated", "bridged": "bridged (no/inconsistent lanes)", "none": "no camera"}
+    ax.legend(handles=[Patch(color=_STATUS_COLOURS[k], label=f"{labels[k]} {counts[k]}") for k in _STATUS_COLOURS],
+              loc="upper center", bbox_to_anchor=(0.5, -0.9), ncol=3, fontsize=8, frameon=False)
+    fig.subplots_adjust(bottom=0.5)
+    return fig
+
+
+def sampler_figure(idata):
+    """ArviZ trace and rank plots of the log camera height and the stature."""
+    import warnings
+
+    import matplotlib.pyplot as plt
+
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        import arviz as az
+
+        fig, axes = plt.subplots(2, 2, figsize=(10, 4.5))
+        for row, var in enumerate(("log_height", "stature")):
+            vals = np.asarray(idata.posterior[var])  # (chain, draw)
+            for c in vals:
+                axes[row, 0].plot(c, lw=0.4, alpha=0.6)
+            axes[row, 0].set_ylabel(var)
+            az.plot_rank(idata, var_names=[var], ax=axes[row, 1])
+            axes[row, 1].set_title("")
+        axes[1, 0].set_xlabel("step")
+    fig.tight_layout()
+    return fig

@@ -18,7 +18,10 @@ from probreg.inference import (
     NormalPrior,
     SamplerSettings,
 )
+from probreg.geometry import JOINT_INDEX
 from probreg.io import load_clip, load_groundtruth, read_angles_csv
+from probreg.io.opensim import read_mot, read_trc
+from probreg.io.results import read_gait_cycle_csv
 from probreg.pipeline import RunOptions, run_clip
 
 FAST = SamplerSettings(n_walkers=20, burn_in=100, chunk=150, max_steps=600, n_draws=12, seed=1)
@@ -97,8 +100,26 @@ def test_run_pipeline_writes_the_result_layout(small_clip, tmp_path):
     out = tmp_path / "res"
     gt = load_groundtruth(small_clip)
     res = run_clip(small_clip, out, RunOptions(sampler=FAST, dist=tuple(gt.cameras[0].dist)), log=lambda *a: None)
-    for name in ("angles.csv", "joints3d.npz", "camera.json", "posterior.nc", "report.html", "gait.json"):
+    for name in ("angles.csv", "joints3d.npz", "camera.json", "posterior.nc", "report.html", "gait.json",
+                 "markers.trc", "angles.mot", "gait_cycle.csv"):
         assert (out / name).exists(), name
+    # the OpenSim files hold the same numbers as the CLIP_FORMAT ones
+    names, t, markers = read_trc(out / "markers.trc")
+    med3d = np.load(out / "joints3d.npz")["median"]
+    shank_trc = np.linalg.norm(markers[:, names.index("RKnee")] - markers[:, names.index("RAnkle")], axis=1)
+    shank_npz = np.linalg.norm(med3d[:, JOINT_INDEX["r_knee"]] - med3d[:, JOINT_INDEX["r_ankle"]], axis=1)
+    ok = np.isfinite(shank_npz)
+    assert ok.mean() > 0.9 and np.max(np.abs(shank_trc[ok] - shank_npz[ok])) < 0.005
+    assert np.allclose(t, np.arange(40) / 50.0)
+    cols, tm, data = read_mot(out / "angles.mot")
+    knee_csv = read_angles_csv(out / "angles.csv")["knee_r"]
+    for k, col in enumerate(("knee_r", "knee_r_lo", "knee_r_hi")):
+        assert np.allclose(data[:, cols.index(col)], knee_csv[1 + k], atol=1e-3, equal_nan=True)
+    cyc = read_gait_cycle_csv(out / "gait_cycle.csv")
+    for (angle, side), (pct, m, lo_c, hi_c) in cyc.items():
+        assert len(pct) == 101 and pct[0] == 0 and pct[-1] == 100
+        fin = np.isfinite(m)
+        assert np.all(lo_c[fin] <= m[fin] + 1e-6) and np.all(m[fin] <= hi_c[fin] + 1e-6)
     ang = read_angles_csv(out / "angles.csv")
     frames, med, lo, hi = ang["knee_r"]
     ok = np.isfinite(med)
