@@ -91,6 +91,23 @@ def _cmd_synth(args):
     return 0
 
 
+def _progress(args):
+    """A tqdm progress-bar factory ``(desc, total) -> bar`` for the pipeline, or None with --quiet."""
+    if getattr(args, "quiet", False):
+        return None
+    from tqdm import tqdm
+
+    return lambda desc, total: tqdm(total=total, desc=f"{desc:<12}", file=sys.stderr, mininterval=0.5,
+                                    leave=False, dynamic_ncols=True)
+
+
+def _log(args):
+    """Stage messages on stdout; with --quiet only the warnings (on stderr)."""
+    if not getattr(args, "quiet", False):
+        return print
+    return lambda msg: print(msg, file=sys.stderr) if str(msg).startswith("warning") else None
+
+
 def _run_options(args):
     from .inference import ModelPriors, SamplerSettings
     from .pipeline import RunOptions
@@ -100,15 +117,34 @@ def _run_options(args):
     sampler = SamplerSettings(n_walkers=args.walkers, max_steps=args.max_steps, n_draws=args.draws,
                               seed=args.seed)
     return RunOptions(priors=priors, sampler=sampler, dist=_parse_dist(args.dist), min_score=args.min_score,
-                      overwrite=args.overwrite, camera_side=args.camera_side)
+                      overwrite=args.overwrite, camera_side=args.camera_side, progress=_progress(args))
 
 
 def _cmd_run(args):
-    from .pipeline import run_clip
+    from .pipeline import run_source
 
-    res = run_clip(args.clip, args.out, _run_options(args))
+    athlete = None
+    if args.athlete is not None:
+        athlete = _parse_floats(args.athlete, 4 if args.athlete.count(",") == 3 else 2,
+                                "--athlete (x,y or x0,y0,x1,y1)")
+    res = run_source(args.clip, args.out, _run_options(args), model=args.model, det_model=args.det_model,
+                     athlete=athlete, fps=args.fps, log=_log(args))
     print(f"results: {args.out}")
     return _verdict_exit(res)
+
+
+def _cmd_config(args):
+    from .config import default_config_toml
+
+    text = default_config_toml()
+    if args.out is None:
+        sys.stdout.write(text)
+        return 0
+    if args.out.exists() and not args.overwrite:
+        raise CliError(f"{args.out} exists: give another path, or --overwrite to replace it")
+    args.out.write_text(text, encoding="utf-8")
+    print(f"default configuration written to {args.out}")
+    return 0
 
 
 def _verdict_exit(res):
@@ -396,6 +432,9 @@ def _add_run_options(p):
                         "to OUT.previous-<time>, never deleted (a probreg result is replaced without it)")
     if not any(a.dest == "seed" for a in p._actions):
         g.add_argument("--seed", type=int, default=0)
+    p.add_argument("--config", type=Path, default=None,
+                   help="TOML file of options (probreg config writes the default); flags override it")
+    p.add_argument("--quiet", action="store_true", help="no progress bars or stage messages (warnings stay)")
 
 
 def build_parser():
@@ -434,11 +473,25 @@ def build_parser():
     _add_run_options(d)
     d.set_defaults(func=_cmd_demo)
 
-    r = sub.add_parser("run", help="the whole pipeline: frames -> lanes -> family -> posterior -> angles")
-    r.add_argument("clip", type=Path)
+    r = sub.add_parser("run", help="the whole pipeline: video or clip -> lanes -> family -> posterior -> angles")
+    r.add_argument("clip", type=Path, help="a clip folder (CLIP_FORMAT) or a video file (mp4, mov, avi, mkv, ...)")
     r.add_argument("--out", type=Path, required=True)
+    r.add_argument("--model", type=Path, default=None,
+                   help="ONNX pose model (YOLO-pose, or top-down with --det-model): needed for a video; with a "
+                        "clip folder the keypoints are detected anew (its keypoints2d.json is left as it is)")
+    r.add_argument("--det-model", type=Path, default=None, help="ONNX YOLO-pose model finding the person box "
+                                                                 "for a top-down --model")
+    r.add_argument("--athlete", default=None,
+                   help="which person is the athlete, in the first frame: x,y (a point on them) or x0,y0,x1,y1 "
+                        "(their box); default: the large central person the camera follows")
+    r.add_argument("--fps", type=float, default=None, help="frame rate of a video whose container states none")
     _add_run_options(r)
     r.set_defaults(func=_cmd_run)
+
+    cf = sub.add_parser("config", help="write the commented default configuration (TOML) for --config")
+    cf.add_argument("--out", type=Path, default=None, help="file to write (default: standard output)")
+    cf.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    cf.set_defaults(func=_cmd_config)
 
     sv = sub.add_parser("sensitivity", help="how much the results depend on the lens distortion assumed (k1 sweep)")
     sv.add_argument("clip", type=Path)
@@ -539,8 +592,31 @@ def build_parser():
     return p
 
 
+def _apply_config(parser, argv):
+    """Defaults from ``--config FILE`` for the commands that take it (flags still override)."""
+    pre = argparse.ArgumentParser(add_help=False)
+    pre.add_argument("--config", type=Path, default=None)
+    known, _ = pre.parse_known_args(argv)
+    if known.config is None:
+        return
+    from .config import read_config
+
+    values = read_config(known.config)
+    for action in parser._subparsers._group_actions:
+        for sp in action.choices.values():
+            dests = {a.dest for a in sp._actions}
+            if "config" in dests:
+                sp.set_defaults(**{k: v for k, v in values.items() if k in dests})
+
+
 def main(argv=None):
     parser = build_parser()
+    argv = sys.argv[1:] if argv is None else list(argv)
+    try:
+        _apply_config(parser, argv)
+    except ValueError as exc:
+        print(f"probreg: error: {exc}", file=sys.stderr)
+        return 2
     args = parser.parse_args(argv)
     try:
         return args.func(args)

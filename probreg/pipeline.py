@@ -42,7 +42,8 @@ from .io.output import atomic_output_dir, prepare_output
 from .io.opensim import write_mot, write_trc
 from .io.results import write_angles_csv, write_gait_cycle_csv, write_joints_npz
 
-__all__ = ["RunOptions", "RunResult", "run_clip", "posterior_inference_data"]
+__all__ = ["RunOptions", "RunResult", "run_clip", "run_source", "detect_athlete", "probe_video", "is_video",
+           "VIDEO_SUFFIXES", "posterior_inference_data"]
 
 
 @dataclass(frozen=True)
@@ -62,6 +63,8 @@ class RunOptions:
     # None: the calibrated bands (probreg.inference.BAND_SCALE and BAND_CURVATURE_S2); a number
     # scales the bootstrap band by it, without the curvature term (1.0: raw bootstrap bands)
     band_inflation: float | None = None
+    # progress(desc, total) -> a bar with update(n) and close() (e.g. tqdm); None: no bars
+    progress: object = None
 
 
 @dataclass
@@ -156,7 +159,12 @@ def _frame_status(lanes, camera, inconsistent, gap_distance):
     return "ok" if gap_distance == 0 else "bridged_no_member"
 
 
-def _write_uncalibrated(clip, reg, side, out_dir, options, message, t0, log):
+def _copy_extra(tmp, extra_files):
+    for name, src in (extra_files or {}).items():
+        (tmp / name).write_bytes(Path(src).read_bytes())
+
+
+def _write_uncalibrated(clip, reg, side, out_dir, options, message, t0, log, inputs, extra_files=None):
     """The result folder of a clip no frame of which calibrates: every file of the layout, with
     NaN angles and joints, null cameras, the lane status of every frame and the verdict
     ``"uncalibrated"`` (nothing is estimated without a camera)."""
@@ -171,7 +179,8 @@ def _write_uncalibrated(clip, reg, side, out_dir, options, message, t0, log):
     timings = {"total_s": time.perf_counter() - t0}
     nan = np.full(F, np.nan)
     summ = {k: (nan, nan, nan) for k in ANGLE_NAMES}
-    with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=[clip.path], log=log) as tmp:
+    with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=inputs, log=log) as tmp:
+        _copy_extra(tmp, extra_files)
         write_angles_csv(tmp / "angles.csv", clip.fps, {k: nan for k in ANGLE_NAMES})
         write_joints_npz(tmp / "joints3d.npz", np.full((F, len(JOINT_NAMES), 3), np.nan))
         write_trc(tmp / "markers.trc", np.full((F, len(JOINT_NAMES), 3), np.nan), clip.fps)
@@ -193,7 +202,7 @@ def _write_uncalibrated(clip, reg, side, out_dir, options, message, t0, log):
     return result
 
 
-def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
+def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, protect=(), extra_files=None):
     """Run the full pipeline on a clip folder and write the result folder.
 
     Raises
@@ -205,9 +214,13 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
 
     A clip no frame of which calibrates (no lanes of the straight anywhere) is not an error: its
     result folder is written with verdict ``"uncalibrated"``, NaN angles and every frame's lane status.
+
+    ``protect`` names further inputs the output may not be or lie in; ``extra_files``
+    ({name: path}) are copied into the result folder (e.g. the keypoints a video run detected).
     """
     t0 = time.perf_counter()
-    prepare_output(out_dir, inputs=[clip_dir], overwrite=options.overwrite)  # before any work
+    inputs = [clip_dir, *protect]
+    prepare_output(out_dir, inputs=inputs, overwrite=options.overwrite)  # before any work
     clip = load_clip(clip_dir, min_score=options.min_score)
     for note in clip.notes:
         log(f"warning: {note}")
@@ -220,7 +233,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
         raise ValueError(f"{clip_dir}: only {seen} frames have a detected athlete (at least 8 joints); "
                          f"the model needs at least 10")
     given = requested_side(options.camera_side, clip.meta, clip.path / "clip.json")
-    reg = register_clip(clip)
+    reg = register_clip(clip, progress=options.progress)
     t1 = time.perf_counter()
     log(f"lanes: {reg.status_counts()} ({t1 - t0:.1f} s)")
     side = reg.orient(options.priors.camera_height.centre(), clip.keypoints_px, options.branch, fps=clip.fps,
@@ -230,13 +243,13 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
         model = ClipModel(reg, clip.keypoints_px, clip.fps, clip.athlete_lane, priors=options.priors,
                           dist=options.dist, branch=options.branch)
     except NoCalibrationError as exc:
-        return _write_uncalibrated(clip, reg, side, out_dir, options, str(exc), t0, log)
-    sampler, tau = model.sample(options.sampler)
+        return _write_uncalibrated(clip, reg, side, out_dir, options, str(exc), t0, log, inputs, extra_files)
+    sampler, tau = model.sample(options.sampler, progress=options.progress)
     chain = sampler.get_chain()  # (steps, walkers, D)
     flat = chain.reshape(-1, chain.shape[-1])
     rng = np.random.default_rng(options.sampler.seed)
     draws = flat[rng.choice(len(flat), min(options.sampler.n_draws, len(flat)), replace=False)]
-    prop = model.propagate(draws, rng, bootstrap_noise=options.sampler.bootstrap_noise)
+    prop = model.propagate(draws, rng, bootstrap_noise=options.sampler.bootstrap_noise, progress=options.progress)
     joints, gait = prop["joints"], prop["gait"]
     idata = posterior_inference_data(sampler, keypoints_px=clip.keypoints_px, frame_lanes=reg.frame_lanes)
     diag = _diagnostics(sampler, tau, idata)
@@ -264,7 +277,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
         clip.n_frames, calibrated=sum(c is not None for c in cam_list), frames_with_angles=n_angle,
         rhat=diag["rhat_height"], ess=diag["ess_height"], log_height_draws=flat[:, 0],
         log_height_prior_sd=getattr(prior_h, "log_sd", None), side=side, bone_cv_pct=bone_length_cv(joints_med))
-    with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=[clip_dir], log=log) as tmp:
+    with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=inputs, log=log) as tmp:
+        _copy_extra(tmp, extra_files)
         write_angles_csv(tmp / "angles.csv", clip.fps, {k: v[0] for k, v in summ.items()},
                          {k: v[1] for k, v in summ.items()}, {k: v[2] for k, v in summ.items()})
         write_joints_npz(tmp / "joints3d.npz", joints_med, samples=joints)
@@ -301,3 +315,153 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print):
     return result
 
 
+
+
+#: file endings ``probreg run`` takes for a video (anything OpenCV's FFmpeg backend decodes works)
+VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".m4v", ".mpg", ".mpeg", ".webm", ".mts", ".ts")
+
+
+def is_video(path):
+    """Whether ``path`` is a video file (by its ending) rather than a clip folder."""
+    p = Path(path)
+    return p.suffix.lower() in VIDEO_SUFFIXES and not p.is_dir()
+
+
+def probe_video(path, fps=None):
+    """``(fps, (width, height), n_frames)`` of a video, read through OpenCV.
+
+    The frame count is decoded when the container does not state it.  ``fps`` overrides a missing
+    or wrong rate in the container.
+
+    Raises
+    ------
+    ClipFormatError
+        When the file is missing, cannot be decoded, or states no frame rate and none is given.
+    """
+    import cv2
+
+    path = Path(path)
+    if not path.is_file():
+        raise ClipFormatError(f"{path}: no such video file")
+    cap = cv2.VideoCapture(str(path))
+    try:
+        if not cap.isOpened():
+            raise ClipFormatError(f"{path}: cannot open the video (not a video, or a codec OpenCV cannot decode)")
+        rate = float(fps) if fps else float(cap.get(cv2.CAP_PROP_FPS) or 0.0)
+        size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
+        n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
+        if n <= 0:
+            n = 0
+            while cap.grab():
+                n += 1
+    finally:
+        cap.release()
+    if n <= 0 or min(size) <= 0:
+        raise ClipFormatError(f"{path}: the video has no decodable frames")
+    if not (rate > 0 and np.isfinite(rate)):
+        raise ClipFormatError(f"{path}: the video states no frame rate; give it with --fps")
+    return rate, size, n
+
+
+def _link_or_copy(src, dst):
+    import shutil
+
+    try:
+        dst.symlink_to(Path(src).resolve())
+    except OSError:  # no symlinks here (some file systems): copy
+        if Path(src).is_dir():
+            shutil.copytree(src, dst)
+        else:
+            shutil.copyfile(src, dst)
+
+
+def detect_athlete(clip, model_path, det_model=None, athlete=None, min_score=0.3, progress=None):
+    """H36M keypoints (F, 17, 3) of the athlete in every frame of ``clip`` with an ONNX pose model.
+
+    The athlete is the person the camera follows: by default the large, central person of the
+    first frames, then followed from frame to frame (:func:`probreg.detect.detect_sequence`);
+    ``athlete`` = ``(x, y)`` (a point on them) or ``(x0, y0, x1, y1)`` (their box) in the first
+    frame picks another one.
+    """
+    from .detect import detect_sequence, load_pose_model
+    from .geometry import coco_to_h36m
+    from .io.frames import iter_frames
+
+    model = load_pose_model(model_path)
+    detector = load_pose_model(det_model) if det_model else None
+    box = point = None
+    if athlete is not None:
+        a = [float(v) for v in athlete]
+        if len(a) == 2:
+            point = a
+        elif len(a) == 4:
+            box = a
+        else:
+            raise ValueError(f"--athlete takes x,y (a point on the athlete) or x0,y0,x1,y1 (their box), got {athlete}")
+    if model.needs_box and detector is None and box is None:
+        raise ValueError(f"{model_path} is a top-down model: it needs --det-model (a YOLO-pose model that finds "
+                         f"the person) or --athlete x0,y0,x1,y1 (the athlete's box in the first frame)")
+    bar = progress("detection", clip.n_frames) if progress is not None else None
+
+    def frames():
+        for item in iter_frames(clip):
+            yield item
+            if bar is not None:
+                bar.update(1)
+
+    try:
+        coco = detect_sequence(frames(), model, detector, box=box, point=point, min_score=min_score)
+    finally:
+        if bar is not None:
+            bar.close()
+    return coco_to_h36m(coco)
+
+
+def run_source(source, out_dir, options: RunOptions = RunOptions(), model=None, det_model=None, athlete=None,
+               fps=None, log=print):
+    """``probreg run``: a clip folder, or a video file, to a result folder.
+
+    A video (:data:`VIDEO_SUFFIXES`) is decoded with OpenCV and needs ``model`` (an ONNX pose
+    model): the athlete is detected and followed in every frame, then the clip runs as a clip
+    folder would.  A clip folder runs as it is; with ``model`` its keypoints are detected anew
+    (its own ``keypoints2d.json`` is left untouched).  The detected keypoints (``keypoints2d.json``)
+    and the clip description used (``input_clip.json``) are kept in the result folder.
+    """
+    import tempfile
+
+    from .io.clip import write_keypoints_json
+
+    source = Path(source)
+    video = is_video(source)
+    if not video and model is None:
+        return run_clip(source, out_dir, options, log=log)
+    if video and model is None:
+        raise ValueError(f"{source} is a video: give a pose model with --model POSE.onnx to find the athlete "
+                         f"(see the README: 'A pose model')")
+    prepare_output(out_dir, inputs=[source], overwrite=options.overwrite)
+    with tempfile.TemporaryDirectory(prefix="probreg-clip-") as scratch:
+        clip_dir = Path(scratch) / (source.stem if video else source.name)
+        clip_dir.mkdir()
+        if video:
+            rate, size, n = probe_video(source, fps)
+            _link_or_copy(source, clip_dir / "video.mp4")
+            write_json(clip_dir / "clip.json", {"fps": rate, "image_size": list(size), "n_frames": n,
+                                                "source": {"video": str(source)}})
+            log(f"video: {n} frames, {size[0]}x{size[1]}, {rate:g} fps")
+        else:
+            if not (source / "clip.json").is_file():
+                raise ClipFormatError(f"{source}: no clip.json (not a clip folder)")
+            (clip_dir / "clip.json").write_bytes((source / "clip.json").read_bytes())
+            for name in ("frames", "video.mp4"):
+                if (source / name).exists():
+                    _link_or_copy(source / name, clip_dir / name)
+        clip = load_clip(clip_dir, min_score=options.min_score)
+        if not has_frames(clip):
+            raise ClipFormatError(f"{source}: no frames to detect the athlete in")
+        kp = detect_athlete(clip, model, det_model, athlete, min_score=options.min_score, progress=options.progress)
+        found = int(np.sum(np.isfinite(kp[:, 0, 0])))
+        log(f"detection: athlete found in {found}/{len(kp)} frames")
+        write_keypoints_json(clip_dir / "keypoints2d.json", kp)
+        return run_clip(clip_dir, out_dir, options, log=log, protect=[source],
+                        extra_files={"keypoints2d.json": clip_dir / "keypoints2d.json",
+                                     "input_clip.json": clip_dir / "clip.json"})

@@ -470,20 +470,33 @@ def register_frames(frame_lanes, image_size, forward_px=(1.0, 0.0), lane_width_m
 
 
 def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(), smooth=True,
-                  mask_athlete=True):
+                  mask_athlete=True, progress=None):
     """Detect lanes in every frame of a clip and build the per-frame families.
 
     With ``mask_athlete`` and the clip's keypoints, line evidence near the athlete is
     ignored (:func:`probreg.lanes.athlete_mask`).  Frames that cannot be read get status
     ``bad_image``, frames whose image file is missing ``missing_image``; nothing raises for
-    bad content.
+    bad content.  ``progress(desc, total)``, when given, makes a progress bar (``update(n)``,
+    ``close()``; e.g. ``tqdm``) that counts the frames.
     """
     kp = clip.keypoints_px if mask_athlete else None
     missing = set(clip.missing_images)
-    fls = [replace(fl, image_size=clip.image_size,
-                   status="missing_image" if fl.frame in missing or i in missing else fl.status)
-           if fl.status == "bad_image" else fl
-           for i, fl in enumerate(track_lanes(iter_frames(clip), config, keypoints_px=kp))]
+    bar = progress("lanes", clip.n_frames) if progress is not None else None
+
+    def frames():
+        for item in iter_frames(clip):
+            yield item
+            if bar is not None:
+                bar.update(1)
+
+    try:
+        fls = [replace(fl, image_size=clip.image_size,
+                       status="missing_image" if fl.frame in missing or i in missing else fl.status)
+               if fl.status == "bad_image" else fl
+               for i, fl in enumerate(track_lanes(frames(), config, keypoints_px=kp))]
+    finally:
+        if bar is not None:
+            bar.close()
     return register_frames(fls, clip.image_size, (1.0, 0.0), clip.lane_width_m, smooth=smooth)
 
 

@@ -556,7 +556,10 @@ class ClipModel(DrawPropagation):
         return p0
 
     def sample(self, settings: SamplerSettings = SamplerSettings(), progress=None):
-        """Run emcee; returns (chain after burn-in, log-probs, acceptance, tau, diagnostics)."""
+        """Run emcee; returns ``(sampler, tau)``.
+
+        ``progress(desc, total)``, when given, makes a progress bar (``update(n)``, ``close()``)
+        that counts the steps (burn-in and the budget; it jumps to the end on convergence)."""
         import emcee
 
         rng = np.random.default_rng(settings.seed)
@@ -568,16 +571,25 @@ class ClipModel(DrawPropagation):
         sampler = emcee.EnsembleSampler(settings.n_walkers, D, self.log_prob, vectorize=True)
         sampler.random_state = np.random.RandomState(settings.seed).get_state()  # reproducible moves
         t0 = time.perf_counter()
+        total = settings.burn_in + settings.max_steps
+        bar = progress("sampling", total) if progress is not None else None
         state = sampler.run_mcmc(p0, settings.burn_in, progress=False, skip_initial_state_check=True)
+        if bar is not None:
+            bar.update(settings.burn_in)
         sampler.reset()
         tau = np.full(D, np.inf)
         steps = 0
         while steps < settings.max_steps:
             state = sampler.run_mcmc(state, settings.chunk, progress=False, skip_initial_state_check=True)
             steps += settings.chunk
+            if bar is not None:
+                bar.update(settings.chunk)
             tau = sampler.get_autocorr_time(tol=0)
             if np.all(np.isfinite(tau)) and steps >= settings.tau_multiple * np.max(tau):
                 break
+        if bar is not None:
+            bar.update(max(0, total - settings.burn_in - steps))  # converged: the rest of the budget is not needed
+            bar.close()
         self.timings["sampling_s"] = time.perf_counter() - t0
         self.sampler = sampler
         return sampler, tau

@@ -21,7 +21,8 @@ class DrawPropagation:
     Needs the clip model's ``cameras_at``, ``lengths``, keypoints (``kp``, ``raw``), noise model
     (``noise_sd``, ``noise_rho``), ``contacts``, ``stride_lag``, ``gap_distance`` and ``timings``."""
 
-    def propagate(self, draws, rng, bootstrap_noise=True, config: LiftConfig = LiftConfig(), workers=None):
+    def propagate(self, draws, rng, bootstrap_noise=True, config: LiftConfig = LiftConfig(), workers=None,
+                  progress=None):
         """Lift the clip for every draw.
 
         Each draw is lifted twice: from the cleaned keypoints (the draw's *point*
@@ -34,7 +35,8 @@ class DrawPropagation:
         Every draw has its own random stream (spawned from ``rng``), so the result
         does not depend on ``workers``: draws are shared out over that many forked
         processes (default: the machine's cores, at most 4; 1, or a platform without
-        ``fork``, runs them here).
+        ``fork``, runs them here).  ``progress(desc, total)``, when given, makes a progress bar
+        (``update(n)``, ``close()``) that counts the draws.
 
         Returns
         -------
@@ -53,8 +55,16 @@ class DrawPropagation:
         with_noise = bootstrap_noise and np.isfinite(self.noise_sd) and self.noise_sd > 0
         job = (draws, L, seeds, cfg, with_noise, self._joint_noise_scale() if with_noise else None)
         workers = max(1, min(_default_workers() if workers is None else int(workers), S))
-        chunks = [list(range(S))[k::workers] for k in range(workers)]
-        parts = _fork_map(lambda idx: self._propagate_draws(idx, *job), chunks)
+        # a few chunks per worker: the progress bar moves, and a slow chunk does not hold the rest
+        n_chunks = min(S, workers * 4) if workers > 1 or progress is not None else 1
+        chunks = [list(range(S))[k::n_chunks] for k in range(n_chunks)]
+        bar = progress("propagation", S) if progress is not None else None
+        try:
+            parts = _fork_map(lambda idx: self._propagate_draws(idx, *job), chunks, workers,
+                              done=None if bar is None else (lambda chunk: bar.update(len(chunk))))
+        finally:
+            if bar is not None:
+                bar.close()
         out = {"joints": np.full((S, self.F, 17, 3), np.nan, np.float32),
                "joints_point": np.full((S, self.F, 17, 3), np.nan, np.float32),
                "angles": {k: np.full((S, self.F), np.nan) for k in ANGLE_NAMES},
@@ -164,23 +174,35 @@ def _forked_chunk(indices):
         return _FORKED(indices)
 
 
-def _fork_map(func, chunks):
-    """``[func(chunk) for chunk in chunks]``, on one forked process per chunk when there are
-    several and the platform forks (the workers inherit ``func`` and its data; only the
-    chunks and the results are pickled), else here, as also when processes are not allowed."""
+def _fork_map(func, chunks, workers=None, done=None):
+    """``[func(chunk) for chunk in chunks]``, on ``workers`` forked processes (default: one per
+    chunk) when there are several and the platform forks (the workers inherit ``func`` and its
+    data; only the chunks and the results are pickled), else here, as also when processes are
+    not allowed.  ``done(chunk)`` is called as each chunk finishes."""
     import multiprocessing as mp
 
     global _FORKED
-    if len(chunks) > 1 and "fork" in mp.get_all_start_methods():
+    workers = len(chunks) if workers is None else min(int(workers), len(chunks))
+    if workers > 1 and "fork" in mp.get_all_start_methods():
         _FORKED = func
         try:
-            with mp.get_context("fork").Pool(len(chunks)) as pool:
-                return pool.map(_forked_chunk, chunks)
+            with mp.get_context("fork").Pool(workers) as pool:
+                out = []
+                for chunk, res in zip(chunks, pool.imap(_forked_chunk, chunks)):
+                    out.append(res)
+                    if done is not None:
+                        done(chunk)
+                return out
         except OSError:  # no processes allowed here (sandbox, limits)
             pass
         finally:
             _FORKED = None
-    return [func(c) for c in chunks]
+    out = []
+    for c in chunks:
+        out.append(func(c))
+        if done is not None:
+            done(c)
+    return out
 
 
 def _ar1_noise(rng, shape, sd, rho):

@@ -1,0 +1,137 @@
+"""Configuration files: a TOML file holding the options of ``probreg run`` (and of the commands
+that share them), as Pose2Sim users keep a ``Config.toml`` per study.
+
+``probreg config > probreg.toml`` writes the commented default; ``probreg run ... --config
+probreg.toml`` reads it.  Precedence: a flag given on the command line > the file > the built-in
+default.  Unknown keys and values of the wrong type are errors that name the key.
+"""
+
+from __future__ import annotations
+
+import tomllib
+from dataclasses import dataclass
+from pathlib import Path
+
+__all__ = ["CONFIG_KEYS", "ConfigError", "default_config_toml", "read_config"]
+
+
+class ConfigError(ValueError):
+    """A configuration file that cannot be used (the message names the file and the key)."""
+
+
+@dataclass(frozen=True)
+class Key:
+    section: str
+    name: str
+    dest: str  # the command-line option's destination
+    kind: type
+    default: object
+    help: str
+
+
+#: Every key of the file, with the command-line option it stands for.
+CONFIG_KEYS = (
+    Key("priors", "camera_height_m", "height_m", float, 9.0,
+        "median of the camera-height prior (m): log-normal, 2-40 m at the default log-sd"),
+    Key("priors", "camera_height_log_sd", "height_log_sd", float, 0.8,
+        "log-sd of the camera-height prior (a small value such as 0.05 when the height is known)"),
+    Key("priors", "stature_m", "stature", float, 1.80, "mean of the athlete's stature prior (m)"),
+    Key("priors", "stature_sd", "stature_sd", float, 0.16,
+        "sd of the stature prior (m): 0.16 holds adults of 1.50-2.10 m; 0.02 when the stature is known"),
+    Key("sampler", "walkers", "walkers", int, 24, "emcee walkers"),
+    Key("sampler", "max_steps", "max_steps", int, 8000, "sampling budget (steps after burn-in)"),
+    Key("sampler", "draws", "draws", int, 60, "posterior draws propagated to angles (the bands)"),
+    Key("sampler", "seed", "seed", int, 0, "random seed (results are reproducible for a seed)"),
+    Key("lens", "dist", "dist", list, [],
+        "known lens distortion [k1, k2, p1, p2, k3] (OpenCV order); [] = none assumed"),
+    Key("camera", "side", "camera_side", str, "auto",
+        "'auto' (decided by the athlete's motion), 'main' (home-straight stands) or 'far' (across the infield)"),
+    Key("detection", "model", "model", str, "", "ONNX pose model for videos (YOLO-pose or top-down); '' = none"),
+    Key("detection", "det_model", "det_model", str, "", "ONNX person detector for a top-down model; '' = none"),
+    Key("detection", "min_score", "min_score", float, 0.3, "keypoints below this confidence are missing"),
+)
+
+
+def _toml_value(v):
+    if isinstance(v, str):
+        return '"' + v.replace("\\", "\\\\").replace('"', '\\"') + '"'
+    if isinstance(v, bool):
+        return "true" if v else "false"
+    if isinstance(v, list):
+        return "[" + ", ".join(_toml_value(x) for x in v) + "]"
+    return repr(v)
+
+
+def default_config_toml():
+    """The commented default configuration (TOML text).
+
+    >>> text = default_config_toml()
+    >>> tomllib.loads(text)["priors"]["stature_m"]
+    1.8
+    """
+    lines = ["# probreg configuration. Flags given on the command line override these values;",
+             "# use it with: probreg run VIDEO_OR_CLIP --out OUT --config probreg.toml", ""]
+    section = None
+    for k in CONFIG_KEYS:
+        if k.section != section:
+            if section is not None:
+                lines.append("")
+            lines.append(f"[{k.section}]")
+            section = k.section
+        lines.append(f"# {k.help}")
+        lines.append(f"{k.name} = {_toml_value(k.default)}")
+    return "\n".join(lines) + "\n"
+
+
+def read_config(path):
+    """The options of a configuration file as ``{option destination: value}`` (only keys present).
+
+    Raises
+    ------
+    ConfigError
+        For a missing or malformed file, an unknown section or key, or a value of the wrong type.
+    """
+    path = Path(path)
+    try:
+        doc = tomllib.loads(path.read_text(encoding="utf-8"))
+    except OSError as exc:
+        raise ConfigError(f"{path}: cannot read the configuration ({exc.strerror or exc})") from None
+    except (tomllib.TOMLDecodeError, UnicodeDecodeError) as exc:
+        raise ConfigError(f"{path}: not valid TOML ({exc})") from None
+    known = {(k.section, k.name): k for k in CONFIG_KEYS}
+    sections = {k.section for k in CONFIG_KEYS}
+    out = {}
+    for section, table in doc.items():
+        if section not in sections or not isinstance(table, dict):
+            raise ConfigError(f"{path}: unknown section [{section}] (known: {', '.join(sorted(sections))})")
+        for name, value in table.items():
+            key = known.get((section, name))
+            if key is None:
+                names = ", ".join(k.name for k in CONFIG_KEYS if k.section == section)
+                raise ConfigError(f"{path}: unknown key '{name}' in [{section}] (known: {names})")
+            out[key.dest] = _convert(path, key, value)
+    return out
+
+
+def _convert(path, key, value):
+    where = f"{path}: [{key.section}] {key.name}"
+    if key.kind is float:
+        if isinstance(value, bool) or not isinstance(value, (int, float)):
+            raise ConfigError(f"{where} must be a number, got {value!r}")
+        return float(value)
+    if key.kind is int:
+        if isinstance(value, bool) or not isinstance(value, int):
+            raise ConfigError(f"{where} must be an integer, got {value!r}")
+        return value
+    if key.kind is str:
+        if not isinstance(value, str):
+            raise ConfigError(f"{where} must be a string, got {value!r}")
+        if key.dest == "camera_side" and value not in ("auto", "main", "far"):
+            raise ConfigError(f"{where} must be 'auto', 'main' or 'far', got {value!r}")
+        return value or None  # '' = not given
+    if key.dest == "dist":
+        if not isinstance(value, list) or (value and (len(value) != 5 or not all(
+                isinstance(v, (int, float)) and not isinstance(v, bool) for v in value))):
+            raise ConfigError(f"{where} must be [] or five numbers [k1, k2, p1, p2, k3], got {value!r}")
+        return ",".join(repr(float(v)) for v in value) if value else None
+    raise ConfigError(f"{where}: unsupported value {value!r}")  # pragma: no cover
