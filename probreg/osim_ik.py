@@ -23,6 +23,9 @@ Files written (``OUT``, default ``RESULT/opensim``):
     ``frame,time_s,coordinate,unit,median,lo,hi``: per frame and model coordinate the IK of the
     median markers and its 90 % band: the 5 % / 95 % quantiles of the IK over the posterior draws,
     taken about the draws' own median and placed around the median's IK.
+``ik_bands.png``
+    Knee and hip IK angles (left and right) over time with their bands (COCO-17 has no foot
+    markers: the ankle coordinates are not observed).
 ``ik.json``
     Settings, the draws used, the Pose2Sim files used and the IK marker error per run.
 """
@@ -262,11 +265,39 @@ def opensim_ik(result_dir, out_dir=None, n_draws=20, setup=None, mass_kg=70.0, o
                     unit = "deg" if name in rot else "m"
                     w.writerow([int(frames[i]), f"{t[i]:.4f}", name, unit, f"{med[i, c]:.4f}", f"{lo[i, c]:.4f}",
                                 f"{hi[i, c]:.4f}"])
+        _ik_figure(tmp / "ik_bands.png", t, cols, med, lo, hi)
         write_json(tmp / "ik.json", {"pose2sim_setup": str(setup), "files": POSE2SIM_FILES, "mass_kg": mass_kg,
                                     "draws": draws, "n_draws": len(draws), "time_range_s": list(t_range),
                                     "opensim_version": getattr(osim, "__version__", "unknown"),
                                     "coordinates": cols, "rotational": sorted(rot), "pose2sim_fixes": fixes})
     return out_dir
+
+
+#: coordinates of the figure: (title, left, right, sign).  COCO-17 has no foot markers, so the
+#: ankle coordinates stay at their defaults; the elbow's IK often sits at the model's 150 deg limit
+#: (the wrist marker alone does not fix the forearm's pronation), so neither is shown.
+_FIGURE = (("knee flexion", "knee_angle_l", "knee_angle_r", 1.0), ("hip flexion", "hip_flexion_l", "hip_flexion_r", 1.0))
+
+
+def _ik_figure(path, t, cols, med, lo, hi):
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=(10, 3.4))
+    axes = fig.subplots(1, len(_FIGURE))
+    for ax, (title, left, right, sign) in zip(axes, _FIGURE):
+        for name, col, side in ((left, "tab:blue", "L"), (right, "tab:orange", "R")):
+            if name not in cols:
+                continue
+            c = cols.index(name)
+            a, b = sorted((sign * lo[:, c], sign * hi[:, c]), key=lambda v: np.nanmean(v))
+            ax.fill_between(t, a, b, color=col, alpha=0.25, lw=0)
+            ax.plot(t, sign * med[:, c], color=col, label=f"{side} (IK of the median, 90 % band over draws)")
+        ax.set_title(f"OpenSim {title}")
+        ax.set_xlabel("time (s)")
+        ax.set_ylabel("deg")
+    axes[0].legend(fontsize=7)
+    fig.tight_layout()
+    fig.savefig(path, dpi=100)
 
 
 def read_ik_bands(path):

@@ -104,7 +104,7 @@ def step_time_s(touchdown_frames, fps):
     d = np.diff(tds)
     med = np.median(d)
     keep = np.abs(d - med) <= 0.25 * med
-    return float(np.mean(d[keep]) / fps) if med > 0 else float("nan")
+    return float(np.mean(d[keep]) / fps) if med > 0 and keep.any() else float("nan")
 
 
 def gait_summary(track, angles_deg, fps):

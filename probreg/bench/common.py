@@ -26,6 +26,7 @@ BENCHMARKS = {
     "detect": "probreg.bench.detect:run",
     "distortion": "probreg.bench.distortion:run",
     "validation": "probreg.bench.validation:run",
+    "video": "probreg.bench.video:run",
 }
 
 

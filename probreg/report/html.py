@@ -23,6 +23,15 @@ th{background:#f3f3f3}img{max-width:100%}figure{margin:1em 0}figcaption{color:#5
 .banner{background:#fde2e2;border:2px solid #b00;padding:.6em 1em;font-weight:bold}
 .ok{background:#e5f5e5;border:1px solid #3a3;padding:.4em 1em}"""
 
+def _subplots(nrows=1, ncols=1, **kw):
+    """``(figure, axes)`` like ``pyplot.subplots``, without pyplot: the library never touches the
+    caller's backend or figure manager (a notebook keeps showing its own figures)."""
+    from matplotlib.figure import Figure
+
+    fig = Figure(figsize=kw.pop("figsize", None))
+    return fig, fig.subplots(nrows, ncols, **kw)
+
+
 class HtmlReport:
     """Builds one HTML page section by section.
 
@@ -51,12 +60,13 @@ class HtmlReport:
         self.parts.append(f"<table><tr>{head}</tr>{body}</table>")
 
     def figure(self, fig, caption=""):
-        """Embed a matplotlib figure (closed afterwards)."""
-        import matplotlib.pyplot as plt
-
+        """Embed a matplotlib figure (a pyplot figure is closed afterwards)."""
         buf = io.BytesIO()
         fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
-        plt.close(fig)
+        if fig.canvas.manager is not None:  # made by pyplot: release it
+            import matplotlib.pyplot as plt
+
+            plt.close(fig)
         self._png(buf.getvalue(), caption)
 
     def image(self, img_bgr, caption="", max_width=960):
@@ -99,11 +109,6 @@ def draw_skeleton(img, joints_px, color=(0, 255, 255), thickness=2):
 
 def clip_report(clip_dir, out_html):
     """Overview of a synthetic clip: a frame with keypoints, camera and gait ground truth."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from ..io.clip import load_clip, load_groundtruth
 
     clip = load_clip(clip_dir)
@@ -132,7 +137,7 @@ def clip_report(clip_dir, out_html):
             rep.image(img, f"frame {mid}: ground-truth skeleton (green), detector-like keypoints (orange)")
     ang = joint_angles(gt.joints3d_track_m)
     t = np.arange(clip.n_frames) / clip.fps
-    fig, axes = plt.subplots(2, 1, figsize=(9, 6), sharex=True)
+    fig, axes = _subplots(2, 1, figsize=(9, 6), sharex=True)
     for name in ("knee_l", "knee_r", "hip_l", "hip_r"):
         axes[0].plot(t, ang[name], label=name)
     axes[0].set_ylabel("angle (deg)")
@@ -184,11 +189,6 @@ def scale_note(stature_prior, stature_draws):
 
 def run_report(out_html, clip, result, joints_median, cameras):
     """Report of a pipeline run: posterior of the calibration and the athlete, angle bands, gait."""
-    import matplotlib
-
-    matplotlib.use("Agg")
-    import matplotlib.pyplot as plt
-
     from ..analysis import GAIT_FIELDS
 
     rep = HtmlReport(f"probreg: {Path(str(clip.path)).name}")
@@ -226,7 +226,7 @@ def run_report(out_html, clip, result, joints_median, cameras):
                   f"{max(d['tau'].values()):.0f} steps ({d['steps_per_tau']:.0f} tau), ESS(height) "
                   f"{d['ess_height']:.0f}, R-hat(height) {d['rhat_height']:.3f}.", cls="note")
     t = np.arange(clip.n_frames) / clip.fps
-    fig, axes = plt.subplots(3, 1, figsize=(10, 9), sharex=True)
+    fig, axes = _subplots(3, 1, figsize=(10, 9), sharex=True)
     for ax, names in zip(axes, (("knee_l", "knee_r"), ("hip_l", "hip_r"), ("elbow_l", "elbow_r"))):
         for name, col in zip(names, ("tab:blue", "tab:orange")):
             med, lo, hi = result.angle_summary[name]
@@ -309,16 +309,14 @@ def uncalibrated_report(out_html, clip, registration, result):
 
 def gait_cycle_figure(curves):
     """Knee, hip and elbow over the gait cycle, left and right, with bands (a matplotlib figure)."""
-    import matplotlib.pyplot as plt
-
     angles = [a for a in ("knee", "hip", "elbow") if any(k[0] == a for k in curves)]
-    fig, axes = plt.subplots(1, max(1, len(angles)), figsize=(4.2 * max(1, len(angles)), 3.6), squeeze=False)
+    fig, axes = _subplots(1, max(1, len(angles)), figsize=(4.2 * max(1, len(angles)), 3.6), squeeze=False)
     for ax, angle in zip(axes[0], angles):
         for side, col in (("L", "tab:blue"), ("R", "tab:orange")):
             if (angle, side) not in curves:
                 continue
             pct, med, lo, hi, *rest = curves[(angle, side)]
-            n = f", {rest[0]} cycles" if rest else ""
+            n = f", {rest[0]} cycles" if rest and rest[0] is not None else ""
             ax.fill_between(pct, lo, hi, color=col, alpha=0.25, lw=0)
             ax.plot(pct, med, color=col, label=f"{side}{n}")
         ax.set_title(f"{angle} flexion")
@@ -331,9 +329,7 @@ def gait_cycle_figure(curves):
 
 def prior_posterior_figure(priors, posterior):
     """Prior and posterior densities of the stature and the camera height."""
-    import matplotlib.pyplot as plt
-
-    fig, axes = plt.subplots(1, 2, figsize=(10, 3.2))
+    fig, axes = _subplots(1, 2, figsize=(10, 3.2))
     for ax, prior, var, label in ((axes[0], priors.stature, "stature", "stature (m)"),
                                   (axes[1], priors.camera_height, "height_m", "camera height (m)")):
         draws = np.asarray(posterior[var]).ravel()
@@ -362,7 +358,6 @@ _STATUS_COLOURS = {"ok": (0.2, 0.65, 0.2), "bridged": (0.95, 0.7, 0.1), "none": 
 
 def status_strip_figure(frame_status, fps):
     """One coloured cell per frame: calibrated (green), bridged (orange), no camera (red)."""
-    import matplotlib.pyplot as plt
     from matplotlib.patches import Patch
 
     def kind(s):
@@ -370,7 +365,7 @@ def status_strip_figure(frame_status, fps):
 
     kinds = [kind(s) for s in frame_status]
     rgb = np.array([[_STATUS_COLOURS[k] for k in kinds]])
-    fig, ax = plt.subplots(figsize=(10, 1.1))
+    fig, ax = _subplots(figsize=(10, 1.1))
     ax.imshow(rgb, aspect="auto", extent=(0, len(kinds) / fps, 0, 1), interpolation="nearest")
     ax.set_yticks([])
     ax.set_xlabel("time (s)")
@@ -386,13 +381,11 @@ def sampler_figure(idata):
     """ArviZ trace and rank plots of the log camera height and the stature."""
     import warnings
 
-    import matplotlib.pyplot as plt
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         import arviz as az
 
-        fig, axes = plt.subplots(2, 2, figsize=(10, 4.5))
+        fig, axes = _subplots(2, 2, figsize=(10, 4.5))
         for row, var in enumerate(("log_height", "stature")):
             vals = np.asarray(idata.posterior[var])  # (chain, draw)
             for c in vals:
