@@ -396,6 +396,31 @@ def _cmd_opensim(args):
     return 0
 
 
+def _cmd_batch(args):
+    from .batch import run_batch
+
+    base = {"stature": args.stature, "stature_sd": args.stature_sd, "height_m": args.height_m,
+            "height_log_sd": args.height_log_sd, "camera_side": args.camera_side,
+            "model": str(args.model.resolve()) if args.model else None, "seed": args.seed, "walkers": args.walkers,
+            "max_steps": args.max_steps, "draws": args.draws, "dist": args.dist, "min_score": args.min_score}
+    if args.workers is not None and args.workers < 1:
+        raise CliError("--workers must be at least 1")
+    try:
+        rows = run_batch(args.manifest, args.out, base, workers=args.workers, scheduler=args.scheduler,
+                         retries=args.retries, progress=not args.quiet, log=_log(args))
+    except RuntimeError as exc:
+        if "not installed" in str(exc):
+            raise CliError(str(exc)) from None
+        raise
+    bad = [r for r in rows if r["status"] != "ok"]
+    if bad:
+        print(f"probreg batch: warning: {sum(r['status'] == 'failed' for r in rows)} failed, "
+              f"{sum(r['status'] == 'flagged' for r in rows)} flagged (see {args.out / 'summary.csv'})",
+              file=sys.stderr)
+        return EXIT_NOT_OK
+    return 0
+
+
 def _cmd_bench(args):
     from .bench import BENCHMARKS, run_benchmark
 
@@ -487,6 +512,20 @@ def build_parser():
     r.add_argument("--fps", type=float, default=None, help="frame rate of a video whose container states none")
     _add_run_options(r)
     r.set_defaults(func=_cmd_run)
+
+    ba = sub.add_parser("batch", help="many clips on Dask distributed: one result folder per clip, summary.csv; "
+                                      "resumable and fault-isolated (needs the [dask] extra)")
+    ba.add_argument("manifest", type=Path, help="CSV with a 'clip' column (folders or videos, relative to the "
+                                                "manifest) and optional per-clip option columns")
+    ba.add_argument("--out", type=Path, required=True, help="batch folder: DIR/<clip name>/ and DIR/summary.csv")
+    ba.add_argument("--workers", type=int, default=None, help="local worker processes, one core each "
+                                                                "(default: the machine's cores)")
+    ba.add_argument("--scheduler", default=None, help="address of a running Dask scheduler, e.g. tcp://HOST:8786 "
+                                                      "(default: a LocalCluster here)")
+    ba.add_argument("--retries", type=int, default=2, help="retries of a clip whose worker died")
+    ba.add_argument("--model", type=Path, default=None, help="ONNX pose model for the videos of the manifest")
+    _add_run_options(ba)
+    ba.set_defaults(func=_cmd_batch)
 
     cf = sub.add_parser("config", help="write the commented default configuration (TOML) for --config")
     cf.add_argument("--out", type=Path, default=None, help="file to write (default: standard output)")

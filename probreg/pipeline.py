@@ -418,7 +418,7 @@ def detect_athlete(clip, model_path, det_model=None, athlete=None, min_score=0.3
 
 
 def run_source(source, out_dir, options: RunOptions = RunOptions(), model=None, det_model=None, athlete=None,
-               fps=None, log=print):
+               fps=None, log=print, extra_files=None):
     """``probreg run``: a clip folder, or a video file, to a result folder.
 
     A video (:data:`VIDEO_SUFFIXES`) is decoded with OpenCV and needs ``model`` (an ONNX pose
@@ -434,7 +434,7 @@ def run_source(source, out_dir, options: RunOptions = RunOptions(), model=None, 
     source = Path(source)
     video = is_video(source)
     if not video and model is None:
-        return run_clip(source, out_dir, options, log=log)
+        return run_clip(source, out_dir, options, log=log, extra_files=extra_files)
     if video and model is None:
         raise ValueError(f"{source} is a video: give a pose model with --model POSE.onnx to find the athlete "
                          f"(see the README: 'A pose model')")
@@ -464,4 +464,4 @@ def run_source(source, out_dir, options: RunOptions = RunOptions(), model=None, 
         write_keypoints_json(clip_dir / "keypoints2d.json", kp)
         return run_clip(clip_dir, out_dir, options, log=log, protect=[source],
                         extra_files={"keypoints2d.json": clip_dir / "keypoints2d.json",
-                                     "input_clip.json": clip_dir / "clip.json"})
+                                     "input_clip.json": clip_dir / "clip.json", **(extra_files or {})})

@@ -161,8 +161,13 @@ class DrawPropagation:
 _FORKED = None
 
 def _default_workers():
+    """Processes for the per-frame and per-draw work: ``PROBREG_WORKERS`` when set (``probreg batch``
+    sets 1: each of its workers is one core), else the machine's cores, at most 4."""
     import os
 
+    env = os.environ.get("PROBREG_WORKERS", "").strip()
+    if env.isdigit() and int(env) > 0:
+        return int(env)
     return min(os.cpu_count() or 1, 4)
 
 

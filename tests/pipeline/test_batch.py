@@ -1,0 +1,155 @@
+"""`probreg batch` on Dask: manifest, fault isolation, resume after a kill, determinism, a separate scheduler."""
+
+import csv
+import json
+import os
+import shutil
+import signal
+import subprocess
+import sys
+import time
+from pathlib import Path
+
+import pytest
+
+from probreg.batch import MANIFEST_COLUMNS, read_manifest
+from probreg.cli import main
+from probreg.io import ClipFormatError
+
+FAST = "20,600,12"  # walkers, max_steps, draws: a short run per clip
+
+
+def _manifest(path, rows, header="clip,walkers,max_steps,draws"):
+    path.write_text(header + "\n" + "\n".join(rows) + "\n")
+    return path
+
+
+def _summary(out):
+    with open(out / "summary.csv", newline="") as fh:
+        return list(csv.DictReader(fh))
+
+
+# ----------------------------------------------------------------------------- the manifest
+def test_manifest_paths_are_relative_to_it_and_options_override(tmp_path):
+    (tmp_path / "season").mkdir()
+    m = tmp_path / "season" / "m.csv"
+    m.write_text("clip,stature_m,camera_side,seed\nheat1,1.62,far,\n/abs/heat2.mp4,,,7\nheat1,,,\n")
+    e = read_manifest(m, {"seed": 0})
+    assert e[0].clip == (tmp_path / "season" / "heat1").resolve() and e[0].options["stature"] == 1.62
+    assert e[0].options["camera_side"] == "far" and e[0].options["seed"] == 0
+    assert e[1].clip == Path("/abs/heat2.mp4") and e[1].name == "heat2" and e[1].options["seed"] == 7
+    assert [x.name for x in e] == ["heat1", "heat2", "heat1-2"]  # one result folder per entry
+    assert {"stature_m", "camera_side", "model"} <= set(MANIFEST_COLUMNS)
+
+
+@pytest.mark.parametrize("text, needle", [
+    ("video\nx\n", "needs a 'clip' column"),
+    ("clip,colour\nx,red\n", "unknown column(s) colour"),
+    ("clip,walkers\nx,many\n", "line 2, column 'walkers'"),
+    ("clip,camera_side\nx,left\n", "not auto, main or far"),
+    ("clip\n\n,\n", "empty 'clip'"),
+])
+def test_bad_manifests_name_line_and_column(tmp_path, text, needle, capsys):
+    m = tmp_path / "m.csv"
+    m.write_text(text)
+    with pytest.raises(ClipFormatError) as exc:
+        read_manifest(m)
+    assert needle in str(exc.value)
+    assert main(["batch", str(m), "--out", str(tmp_path / "o")]) == 2
+    assert needle in capsys.readouterr().err
+
+
+# ----------------------------------------------------------------------------- on a LocalCluster
+pytest.importorskip("distributed")
+
+
+@pytest.fixture(scope="module")
+def season(small_clip, tmp_path_factory):
+    root = tmp_path_factory.mktemp("season")
+    for name in ("heat1", "heat2"):
+        shutil.copytree(small_clip, root / name)
+    (root / "broken").mkdir()
+    (root / "broken" / "clip.json").write_text("{ not json")
+    return root
+
+
+@pytest.mark.slow
+def test_batch_isolates_a_broken_clip_resumes_and_equals_single_runs(season, tmp_path):
+    m = _manifest(season / "m.csv", [f"heat1,{FAST}", "broken,,,", f"heat2,{FAST}"])
+    out = tmp_path / "batch"
+    assert main(["batch", str(m), "--out", str(out), "--workers", "2", "--quiet"]) == 3  # one failed
+    rows = _summary(out)
+    assert [r["name"] for r in rows] == ["heat1", "broken", "heat2"]
+    assert rows[1]["status"] == "failed" and "clip.json" in rows[1]["error"]
+    for r in (rows[0], rows[2]):
+        assert r["status"] in ("ok", "flagged") and r["error"] == "" and float(r["knee_band_width_deg"]) > 0
+        assert r["verdict"] in ("ok", "unreliable") and float(r["wall_s"]) > 0
+    # the same clip, the same options: batch equals a single `probreg run` byte for byte
+    single = tmp_path / "single"
+    main(["run", str(season / "heat1"), "--out", str(single), "--walkers", "20", "--max-steps", "600",
+          "--draws", "12", "--quiet"])
+    assert (single / "angles.csv").read_bytes() == (out / "heat1" / "angles.csv").read_bytes()
+    # a rerun skips what is done and leaves it byte-identical; the broken clip is tried again
+    before = {p: p.read_bytes() for p in (out / "heat1").iterdir()}
+    mtimes = {p: p.stat().st_mtime_ns for p in before}
+    assert main(["batch", str(m), "--out", str(out), "--workers", "1", "--quiet"]) == 3
+    assert {p: p.read_bytes() for p in (out / "heat1").iterdir()} == before
+    assert {p: p.stat().st_mtime_ns for p in before} == mtimes
+    rows2 = _summary(out)
+    assert [r["name"] for r in rows2] == ["heat1", "broken", "heat2"]  # no duplicate rows
+    assert rows2[0]["skipped"] == "yes" and rows2[1]["status"] == "failed"
+    # changed options make a clip run again
+    _manifest(m, [f"heat1,{FAST}", "broken,,,", "heat2,20,600,10"])
+    assert main(["batch", str(m), "--out", str(out), "--workers", "2", "--quiet"]) == 3
+    rows3 = _summary(out)
+    assert rows3[0]["skipped"] == "yes" and rows3[2]["skipped"] == "no"
+
+
+@pytest.mark.slow
+def test_a_batch_killed_midway_completes_on_rerun(season, tmp_path):
+    m = _manifest(season / "m2.csv", [f"heat1,{FAST}", f"heat2,{FAST}"])
+    out = tmp_path / "batch"
+    cmd = [sys.executable, "-m", "probreg", "batch", str(m), "--out", str(out), "--workers", "1", "--quiet"]
+    proc = subprocess.Popen(cmd, start_new_session=True, stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL)
+    t0 = time.time()
+    while time.time() - t0 < 300 and not (out / "heat1" / ".probreg").exists() and proc.poll() is None:
+        time.sleep(0.2)
+    os.killpg(proc.pid, signal.SIGKILL)  # the whole batch, workers included, mid-way
+    proc.wait()
+    assert (out / "heat1" / ".probreg").exists(), "the first clip did not finish before the kill"
+    first = (out / "heat1" / "angles.csv").read_bytes()
+    assert main(["batch", str(m), "--out", str(out), "--workers", "1", "--quiet"]) in (0, 3)
+    rows = _summary(out)
+    assert [r["name"] for r in rows] == ["heat1", "heat2"] and rows[0]["skipped"] == "yes"
+    assert all(r["status"] in ("ok", "flagged") for r in rows)
+    assert (out / "heat1" / "angles.csv").read_bytes() == first
+    assert not list(out.glob(".heat*.tmp-*"))  # no half results left behind
+
+
+@pytest.mark.slow
+def test_batch_on_a_separately_started_scheduler(season, tmp_path):
+    if shutil.which("dask", path=str(Path(sys.executable).parent)) is None:
+        pytest.skip("the dask command line is not installed")
+    dask_cli = str(Path(sys.executable).parent / "dask")
+    sched_file = tmp_path / "scheduler.json"
+    sched = subprocess.Popen([dask_cli, "scheduler", "--port", "0", "--dashboard-address", ":0",
+                              "--scheduler-file", str(sched_file)], stdout=subprocess.DEVNULL,
+                             stderr=subprocess.DEVNULL, start_new_session=True)
+    worker = None
+    try:
+        t0 = time.time()
+        while not sched_file.exists() and time.time() - t0 < 60:
+            time.sleep(0.2)
+        address = json.loads(sched_file.read_text())["address"]
+        worker = subprocess.Popen([dask_cli, "worker", address, "--nthreads", "1", "--nworkers", "1"],
+                                  stdout=subprocess.DEVNULL, stderr=subprocess.DEVNULL, start_new_session=True)
+        m = _manifest(season / "m3.csv", [f"heat2,{FAST}"])
+        out = tmp_path / "batch"
+        assert main(["batch", str(m), "--out", str(out), "--scheduler", address, "--quiet"]) in (0, 3)
+        rows = _summary(out)
+        assert len(rows) == 1 and rows[0]["status"] in ("ok", "flagged") and (out / "heat2" / "angles.csv").exists()
+    finally:
+        for p in (worker, sched):
+            if p is not None:
+                os.killpg(p.pid, signal.SIGTERM)
+                p.wait(timeout=30)
