@@ -277,66 +277,12 @@ def _cmd_lift(args):
 
 
 def _cmd_import(args):
-    import shutil
+    from .io.importer import import_clip
 
-    import cv2
-
-    from .io.clip import atomic_output_dir, write_json, write_keypoints_json
-    from .io.keypoints import read_keypoints
-
-    _prepare_out(args.out, [args.keypoints, args.video, args.frames], args.overwrite)
-    kwargs = {"min_score": args.min_score}
-    if args.format == "npy" or (args.format is None and str(args.keypoints).endswith((".npy", ".npz"))):
-        kwargs["layout"] = args.layout
-    if args.trc_image_height is not None:
-        kwargs["image_height"] = args.trc_image_height
-    kp = read_keypoints(args.keypoints, args.format, **kwargs)
-    if (args.video is None) == (args.frames is None):
-        raise CliError("give exactly one of --video FILE or --frames DIR")
-    if args.video is not None:
-        cap = cv2.VideoCapture(str(args.video))
-        if not cap.isOpened():
-            raise CliError(f"{args.video}: cannot open the video")
-        n_src = int(cap.get(cv2.CAP_PROP_FRAME_COUNT))
-        size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
-        fps = args.fps or cap.get(cv2.CAP_PROP_FPS)
-        cap.release()
-        frames = None
-    else:
-        frames = sorted(p for p in Path(args.frames).glob("*") if p.suffix.lower() in (".jpg", ".jpeg", ".png"))
-        if not frames:
-            raise CliError(f"{args.frames}: no .jpg/.png frames")
-        img = cv2.imread(str(frames[0]))
-        if img is None:
-            raise CliError(f"{frames[0]}: cannot read the image")
-        size = (img.shape[1], img.shape[0])
-        n_src = len(frames)
-        if not args.fps:
-            raise CliError("--fps is required with --frames (a folder of images has no frame rate)")
-        fps = args.fps
-    if not fps or fps <= 0:
-        raise CliError("the frame rate is unknown: give --fps")
-    if len(kp) > n_src:
-        raise CliError(f"{args.keypoints}: {len(kp)} frames of keypoints but the video has only {n_src}")
-    if len(kp) < n_src:
-        kp = np.concatenate([kp, np.full((n_src - len(kp), 17, 3), np.nan)])
-        print(f"note: keypoints cover {len(kp)} of {n_src} frames; the rest are marked missing")
-    with atomic_output_dir(args.out, overwrite=args.overwrite,
-                           inputs=[p for p in (args.keypoints, args.video, args.frames) if p is not None],
-                           log=print) as tmp:
-        if frames is not None:
-            (tmp / "frames").mkdir()
-            for i, p in enumerate(frames):
-                shutil.copyfile(p, tmp / "frames" / f"{i:06d}{p.suffix.lower()}")
-        else:
-            shutil.copyfile(args.video, tmp / "video.mp4")
-        meta = {"fps": float(fps), "image_size": list(size), "n_frames": n_src,
-                "source": {"keypoints": str(args.keypoints), "format": args.format}}
-        if args.athlete_lane is not None:
-            meta["athlete_lane"] = args.athlete_lane
-        write_json(tmp / "clip.json", meta)
-        write_keypoints_json(tmp / "keypoints2d.json", kp)
-    print(f"clip with {n_src} frames written to {args.out}")
+    _, n = import_clip(args.out, args.keypoints, video=args.video, frames=args.frames, fps=args.fps, fmt=args.format,
+                       layout=args.layout, trc_image_height=args.trc_image_height, min_score=args.min_score,
+                       athlete_lane=args.athlete_lane, overwrite=args.overwrite)
+    print(f"clip with {n} frames written to {args.out}")
     return 0
 
 

@@ -27,6 +27,8 @@ BENCHMARKS = {
     "distortion": "probreg.bench.distortion:run",
     "validation": "probreg.bench.validation:run",
     "video": "probreg.bench.video:run",
+    "speed": "probreg.bench.speed:run",
+    "batch": "probreg.bench.batch:run",
 }
 
 

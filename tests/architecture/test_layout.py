@@ -60,3 +60,14 @@ def test_every_stage_says_what_it_does_and_exports_its_names():
         assert hasattr(mod, "__all__") and mod.__all__, init
         for name in mod.__all__:
             assert hasattr(mod, name), (init, name)
+
+
+def test_help_imports_no_heavy_module():
+    """`probreg --help` starts fast: no matplotlib, ArviZ, OpenCV, SciPy, Dask or OpenSim behind it."""
+    code = ("import sys, contextlib, io\nfrom probreg.cli import main\n"
+            "with contextlib.redirect_stdout(io.StringIO()):\n"
+            "    try:\n        main(['--help'])\n    except SystemExit:\n        pass\n"
+            "heavy = {'matplotlib', 'arviz', 'cv2', 'scipy', 'dask', 'distributed', 'opensim', 'emcee', 'xarray'}\n"
+            "print(sorted(heavy & {m.split('.')[0] for m in sys.modules}))")
+    out = subprocess.run([sys.executable, "-c", code], capture_output=True, text=True, check=True)
+    assert out.stdout.strip() == "[]"
