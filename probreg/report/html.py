@@ -13,7 +13,8 @@ import numpy as np
 from ..geometry import BONES, JOINT_INDEX, joint_angles
 
 __all__ = ["HtmlReport", "draw_skeleton", "clip_report", "run_report", "uncalibrated_report", "gait_cycle_figure",
-           "prior_posterior_figure", "status_strip_figure", "sampler_figure"]
+           "prior_posterior_figure", "status_strip_figure", "sampler_figure",
+           "rank_histograms"]
 
 
 _CSS = """body{font-family:system-ui,sans-serif;max-width:1100px;margin:2em auto;color:#222}
@@ -219,8 +220,9 @@ def run_report(out_html, clip, result, joints_median, cameras):
                "did not measure the quantity")
     if getattr(result, "frame_status", None):
         rep.figure(status_strip_figure(result.frame_status, clip.fps), "Per-frame status (run.json frame_status)")
-    rep.figure(sampler_figure(result.posterior), "Sampler diagnostics (ArviZ): trace and rank plots of the log "
-               "camera height and the stature, one line per walker; flat rank histograms mean the walkers mixed")
+    rep.figure(sampler_figure(result.posterior), "Sampler diagnostics: trace and rank plots of the log camera "
+               "height and the stature, one line (one row of bars) per walker; flat rank histograms (bars up to the "
+               "dashed line) mean the walkers mixed. R-hat and ESS below are ArviZ's.")
     rep.paragraph(f"emcee: {d['walkers']} walkers x {d['steps']} steps, acceptance "
                   f"{d['acceptance_fraction']:.2f}, max integrated autocorrelation time "
                   f"{max(d['tau'].values()):.0f} steps ({d['steps_per_tau']:.0f} tau), ESS(height) "
@@ -377,22 +379,51 @@ def status_strip_figure(frame_status, fps):
     return fig
 
 
-def sampler_figure(idata):
-    """ArviZ trace and rank plots of the log camera height and the stature."""
-    import warnings
+def rank_histograms(draws, n_bins=20):
+    """Rank-plot data of one quantity: the ranks of all draws pooled over chains, histogrammed per
+    chain (Vehtari et al. 2021, the plot ``arviz.plot_rank`` draws); uniform when the chains mixed.
 
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        import arviz as az
+    Parameters
+    ----------
+    draws : ndarray (chains, draws)
 
-        fig, axes = _subplots(2, 2, figsize=(10, 4.5))
-        for row, var in enumerate(("log_height", "stature")):
-            vals = np.asarray(idata.posterior[var])  # (chain, draw)
-            for c in vals:
-                axes[row, 0].plot(c, lw=0.4, alpha=0.6)
-            axes[row, 0].set_ylabel(var)
-            az.plot_rank(idata, var_names=[var], ax=axes[row, 1])
-            axes[row, 1].set_title("")
-        axes[1, 0].set_xlabel("step")
+    Returns
+    -------
+    ndarray (chains, n_bins) counts, and the count a uniform histogram would have.
+
+    >>> h, uniform = rank_histograms(np.arange(40.0).reshape(4, 10) % 7, n_bins=5)
+    >>> h.shape, float(uniform), int(h.sum())
+    ((4, 5), 2.0, 40)
+    """
+    from scipy.stats import rankdata
+
+    x = np.asarray(draws, float)
+    ranks = rankdata(x.ravel()).reshape(x.shape)
+    edges = np.linspace(0.5, x.size + 0.5, n_bins + 1)
+    h = np.stack([np.histogram(r, edges)[0] for r in ranks])
+    return h, x.shape[1] / n_bins
+
+
+def sampler_figure(idata, max_points=800):
+    """Trace and rank plots of the log camera height and the stature, one colour per walker (the
+    trace thinned to ``max_points`` steps per walker for drawing; the ranks use every draw)."""
+    fig, axes = _subplots(2, 2, figsize=(10, 4.5))
+    for row, var in enumerate(("log_height", "stature")):
+        vals = np.asarray(idata.posterior[var])  # (chain, draw)
+        step = max(1, vals.shape[1] // max_points)
+        x = np.arange(vals.shape[1])[::step]
+        for c in vals:
+            axes[row, 0].plot(x, c[::step], lw=0.4, alpha=0.6)
+        axes[row, 0].set_ylabel(var)
+        h, uniform = rank_histograms(vals)
+        width = 1.0 / h.shape[1]
+        for k, counts in enumerate(h):  # one row of bars per chain, as ArviZ draws them
+            axes[row, 1].bar(np.arange(h.shape[1]) * width, counts / (2.2 * uniform), width=width, bottom=k,
+                             align="edge", lw=0, alpha=0.8)
+            axes[row, 1].axhline(k + 1 / 2.2, color="k", lw=0.3, ls="--")
+        axes[row, 1].set_yticks([])
+        axes[row, 1].set_ylabel("walker")
+        axes[row, 1].set_xlabel("rank among all draws (fraction)" if row == 1 else "")
+    axes[1, 0].set_xlabel("step")
     fig.tight_layout()
     return fig
