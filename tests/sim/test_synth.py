@@ -72,7 +72,6 @@ def test_rendered_line_centres_within_one_pixel(dist):
         ok = cam.in_image(px, margin_px=-20)
         px = px[ok]
         for u in np.linspace(px[:, 0].min() + 5, px[:, 0].max() - 5, 15):
-            v = np.interp(u, px[:, 0], px[:, 1]) if px[0, 0] < px[-1, 0] else np.interp(u, px[::-1, 0], px[::-1, 1])
             col = int(round(u))
             v_at_col = np.interp(col, px[:, 0], px[:, 1]) if px[0, 0] < px[-1, 0] else np.interp(col, px[::-1, 0], px[::-1, 1])
             rows = np.arange(int(v_at_col) - 6, int(v_at_col) + 7)
