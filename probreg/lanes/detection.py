@@ -9,6 +9,7 @@ from __future__ import annotations
 
 from dataclasses import replace
 
+import cv2
 import numpy as np
 
 from ..geometry import cross3
@@ -65,6 +66,40 @@ def detect_lanes(image_bgr, config: LaneDetectorConfig = LaneDetectorConfig(), f
     """
     if image_bgr is None or not hasattr(image_bgr, "shape") or image_bgr.ndim != 3 or image_bgr.size == 0:
         return FrameLanes(status="bad_image", frame=frame)
+    fl = _detect(image_bgr, config, frame, dist, focal_px, exclude)
+    if fl.ok or not config.low_contrast_threshold:
+        return fl
+    low = low_contrast_threshold(image_bgr, config)
+    if low >= config.threshold:
+        return fl
+    faint = _detect(image_bgr, replace(config, threshold=low), frame, dist, focal_px, exclude)
+    if not faint.ok:
+        return fl
+    return replace(faint, extra={**faint.extra, "low_contrast_threshold": low})
+
+
+def low_contrast_threshold(image_bgr, config: LaneDetectorConfig = LaneDetectorConfig()):
+    """Threshold of the white-line response for faint lines: ``low_contrast_snr`` times the
+    response's noise sd (from the median absolute difference of neighbouring pixels of the
+    per-pixel channel minimum at working resolution), at least ``low_contrast_threshold``.
+
+    >>> rng = np.random.default_rng(0)
+    >>> quiet = np.clip(rng.normal(100, 2.0, (200, 400, 3)), 0, 255).astype(np.uint8)
+    >>> noisy = np.clip(rng.normal(100, 6.0, (200, 400, 3)), 0, 255).astype(np.uint8)
+    >>> low_contrast_threshold(quiet), low_contrast_threshold(noisy) > 20
+    (12, True)
+    """
+    h, w = image_bgr.shape[:2]
+    scale = min(1.0, config.work_width_px / w)
+    small = cv2.resize(image_bgr, (int(round(w * scale)), int(round(h * scale))),
+                       interpolation=cv2.INTER_AREA) if scale < 1 else image_bgr
+    g = small.min(axis=2).astype(np.float32)
+    d = np.abs(np.diff(g, axis=1)).ravel()
+    sd = 1.4826 * float(np.median(d)) / np.sqrt(2.0)
+    return int(max(config.low_contrast_threshold, np.ceil(config.low_contrast_snr * sd)))
+
+
+def _detect(image_bgr, config, frame, dist, focal_px, exclude):
     h, w = image_bgr.shape[:2]
     size = (w, h)
     segs, n_mask = _segments(image_bgr, config)

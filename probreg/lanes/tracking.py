@@ -74,13 +74,18 @@ def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypo
             size = (img.shape[1], img.shape[0])
             chords = [c for c in (_image_chord(_translate(ln.line, shift), size) for ln in prev.lines)
                       if c is not None]
-            cands, (n_curved, curved_len) = _measure_candidates(img, chords, config, distinct=True,
+            # faint lines found at a lower threshold are followed at that threshold
+            low = prev.extra.get("low_contrast_threshold")
+            cfg = config if low is None else replace(config, threshold=low)
+            cands, (n_curved, curved_len) = _measure_candidates(img, chords, cfg, distinct=True,
                                                                 exclude=exclude)
             if len(cands) >= max(config.min_lines, len(prev.lines) - 1):
-                fl = _pencil_from_candidates(_dedupe(cands, config),
+                extra = {"curved_length_px": curved_len}
+                if low is not None:
+                    extra["low_contrast_threshold"] = low
+                fl = _pencil_from_candidates(_dedupe(cands, cfg),
                                              FrameLanes(status="no_lines", image_size=size, frame=i,
-                                                        n_curved=n_curved,
-                                                        extra={"curved_length_px": curved_len}), config)
+                                                        n_curved=n_curved, extra=extra), cfg)
                 if not fl.ok or len(fl.lines) < len(prev.lines) - 1 or \
                         max(ln.rms_px for ln in fl.lines) > _track_rms_bound(prev, config):
                     fl = None

@@ -59,6 +59,11 @@ class LaneDetectorConfig:
     #: previous frame's worst line ``)``: the profiles caught a neighbouring line
     track_rms_px: float = 0.5
     track_rms_factor: float = 3.0
+    #: faint lines: when a frame gives no lane pencil at ``threshold``, it is detected again at
+    #: ``max(low_contrast_threshold, low_contrast_snr x`` the response's noise sd ``)`` (lines
+    #: 15-25 grey levels above the track; worn paint, haze, a long lens); 0 turns it off
+    low_contrast_threshold: int = 12
+    low_contrast_snr: float = 6.0
 
 
 @dataclass(frozen=True)

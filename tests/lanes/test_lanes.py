@@ -349,3 +349,49 @@ def test_lines_measured_in_one_batch_equal_lines_measured_alone():
         d = s[1] - s[0]
         n = np.array([-d[1], d[0]]) / np.hypot(*d)
         assert np.median(np.abs((pts - s[0]) @ n)) < 0.3
+
+
+def _faint_lanes_image(contrast, spacing_px, rng, W=1920, H=1080, width=2.0, noise=2.0):
+    """Six lane lines ``contrast`` grey levels above a red track, ``spacing_px`` apart at the
+    left edge and converging to a vanishing point far right (5.4-8 px apart at the right edge for
+    8 px), 2 px wide, anti-aliased, with sensor noise."""
+    img = np.zeros((H, W, 3), np.float32)
+    img[:] = (70, 80, 170)
+    vp = np.array([6000.0, -900.0])
+    xx, yy = np.arange(W), np.arange(H)[:, None]
+    lines = []
+    for k in range(6):
+        y0 = 300 + k * (spacing_px + 6 * k)
+        yc = y0 + (vp[1] - y0) / vp[0] * xx
+        img += contrast * np.clip(width / 2 + 0.5 - np.abs(yy - yc[None, :]), 0, 1)[..., None]
+        lines.append(np.cross([0.0, y0, 1.0], [vp[0], vp[1], 1.0]))
+    img += rng.normal(0, noise, img.shape)
+    return np.clip(img, 0, 255).astype(np.uint8), lines, vp
+
+
+@pytest.mark.parametrize("contrast, spacing", [(25, 10), (20, 9), (15, 8)])
+def test_faint_close_lines_are_found_to_sub_pixel(contrast, spacing):
+    """Lines 15-25 grey levels above the track and 8-10 px apart (issue 25): found by the
+    low-contrast pass, each within a fraction of a pixel of the truth."""
+    rng = np.random.default_rng(contrast)
+    img, truth, vp = _faint_lanes_image(contrast, spacing, rng)
+    fl = detect_lanes(img)
+    assert fl.status == "ok" and len(fl.lines) == 6
+    assert fl.extra["low_contrast_threshold"] < LaneDetectorConfig().threshold
+    xs = np.linspace(50, 1870, 12)
+    for ln in fl.lines:
+        a, b, c = ln.line
+        y_est = -(a * xs + c) / b
+        errs = [np.abs(y_est - (-(t[0] * xs + t[2]) / t[1])).max() for t in truth]
+        assert min(errs) < 0.5, (contrast, spacing, min(errs))
+    est_vp = fl.vp_px()
+    assert abs(est_vp[1] - vp[1]) / abs(vp[0]) < 0.01  # direction to the vanishing point within ~0.6 deg
+
+
+def test_strong_lines_never_use_the_low_contrast_pass():
+    rng = np.random.default_rng(1)
+    img, _, _ = _faint_lanes_image(80, 14, rng)
+    fl = detect_lanes(img)
+    assert fl.status == "ok" and "low_contrast_threshold" not in fl.extra
+    off = detect_lanes(_faint_lanes_image(20, 10, rng)[0], LaneDetectorConfig(low_contrast_threshold=0))
+    assert off.status != "ok"  # the pass can be turned off, and it is what finds faint lines
