@@ -70,9 +70,9 @@ __all__ = ["ClipModel", "SamplerSettings", "PARAM_NAMES", "STILLNESS_SYS_SD", "N
 
 
 class NoCalibrationError(ValueError):
-    """No frame of the clip has a usable calibration family (no lanes of the straight found):
-    the clip cannot be calibrated (:func:`probreg.pipeline.run_clip` writes an ``"uncalibrated"``
-    result)."""
+    """No frame of the clip has a usable calibration family (no lanes of the straight found, or
+    lanes that allow no camera height the prior admits): the clip cannot be calibrated
+    (:func:`probreg.pipeline.run_clip` writes an ``"uncalibrated"`` result)."""
 
 
 #: Systematic sd of the planted-foot slide (fraction of the running speed) at the true
@@ -159,8 +159,9 @@ class ClipModel(DrawPropagation):
         plo, phi = priors.camera_height.interval(0.998)
         g_lo, g_hi = max(lo, plo), min(hi, phi)
         if not g_hi > g_lo:
-            raise ValueError(f"the prior's camera heights ({plo:.1f}-{phi:.1f} m) do not overlap the "
-                             f"heights the lanes allow ({lo:.1f}-{hi:.1f} m)")
+            # lanes that allow no plausible camera (e.g. spurious lines of a grazing view) calibrate nothing
+            raise NoCalibrationError(f"the prior's camera heights ({plo:.1f}-{phi:.1f} m) do not overlap the "
+                                     f"heights the lanes allow ({lo:.1f}-{hi:.1f} m)")
         self.h_ref = float(np.clip(priors.camera_height.centre(), g_lo, g_hi))
         self._fix_offsets()
         self.grid = np.geomspace(g_lo, g_hi, n_grid)

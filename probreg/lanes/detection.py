@@ -249,6 +249,9 @@ def _pencil_from_candidates(cands, fl, cfg):
     offs = -(lines_px @ c0) * np.sign(lines_px[:, :2] @ nrm)  # signed position along nrm
     if offs[order[-1]] < offs[order[0]]:
         order = order[::-1]
+    if not (np.all(np.isfinite(coord)) and np.all(np.isfinite(v_unit))):
+        # a degenerate pencil (lines merging into one, e.g. a grazing view): no lane geometry
+        return replace(fl, status="too_few_lines", extra={**fl.extra, "degenerate_pencil": True})
     idx, spacing = assign_line_indices(coord[order], cfg.max_missing_lines)
     lanes = tuple(LaneLine(line=lines_px[o], points_px=sets[o], rms_px=float(np.sqrt(np.mean(res[o] ** 2))),
                            index=int(k)) for o, k in zip(order, idx))

@@ -25,7 +25,8 @@ def draw_lanes(image_bgr, fl: FrameLanes, color=(255, 0, 255)):
         if all(np.isfinite(p0 + p1)) and max(map(abs, p0 + p1)) < 1e6:
             cv2.line(img, tuple(int(round(v)) for v in p0), tuple(int(round(v)) for v in p1), color, 2, cv2.LINE_AA)
         e = ln.endpoints_px
-        cv2.putText(img, str(ln.index), tuple(int(v) for v in e[1]), cv2.FONT_HERSHEY_SIMPLEX, 1.0, color, 2)
+        if np.all(np.isfinite(e[1])) and np.max(np.abs(e[1])) < 1e6:
+            cv2.putText(img, str(ln.index), tuple(int(v) for v in e[1]), cv2.FONT_HERSHEY_SIMPLEX, 1.0, color, 2)
     vp = fl.vp_px()
     if np.all(np.isfinite(vp)) and -w < vp[0] < 2 * w and -h < vp[1] < 2 * h:
         cv2.circle(img, (int(vp[0]), int(vp[1])), 12, (0, 255, 255), 3)

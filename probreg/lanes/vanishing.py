@@ -252,12 +252,15 @@ def assign_line_indices(pencil_coord, max_missing=2):
     t = np.asarray(pencil_coord, float)
     n = len(t)
     base = np.arange(n)
-    if n < 4:
+    if n < 4 or not np.all(np.isfinite(t)):  # (degenerate pencils give no coordinates: consecutive)
         return base, float("nan")
 
     def fit(k):
         A = np.column_stack([k, np.ones(n), -t * k, -t])
-        _, _, vt = np.linalg.svd(A)
+        try:
+            _, _, vt = np.linalg.svd(A)
+        except np.linalg.LinAlgError:
+            return float("inf")
         a, b, c, d = vt[-1]
         pred = (a * k + b) / (c * k + d)
         return float(np.sqrt(np.mean((pred - t) ** 2)))
@@ -389,7 +392,10 @@ def _spacing_residual_px(lanes, coord, idx, vp_unit, image_size):
     k = np.asarray(idx, float)
     t = np.asarray(coord, float)
     A = np.column_stack([k, np.ones(len(k)), -t * k, -t])
-    _, _, vt = np.linalg.svd(A)
+    try:
+        _, _, vt = np.linalg.svd(A)
+    except np.linalg.LinAlgError:  # non-finite coordinates: no spacing fit
+        return float("nan")
     a, b, c, d = vt[-1]
     pred = (a * k + b) / (c * k + d)
     e1, e2 = _pencil_basis(vp_unit)
