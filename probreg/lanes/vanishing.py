@@ -391,6 +391,8 @@ def _spacing_residual_px(lanes, coord, idx, vp_unit, image_size):
     equally spaced pencil (a 1-D projective map of the indices) predicts."""
     k = np.asarray(idx, float)
     t = np.asarray(coord, float)
+    if not np.all(np.isfinite(t)):
+        return float("nan")
     A = np.column_stack([k, np.ones(len(k)), -t * k, -t])
     try:
         _, _, vt = np.linalg.svd(A)

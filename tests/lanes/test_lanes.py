@@ -395,3 +395,13 @@ def test_strong_lines_never_use_the_low_contrast_pass():
     assert fl.status == "ok" and "low_contrast_threshold" not in fl.extra
     off = detect_lanes(_faint_lanes_image(20, 10, rng)[0], LaneDetectorConfig(low_contrast_threshold=0))
     assert off.status != "ok"  # the pass can be turned off, and it is what finds faint lines
+
+
+def test_a_degenerate_pencil_is_not_a_crash():
+    """Lines that merge (a grazing view) give NaN pencil coordinates: consecutive indices, no fit."""
+    idx, res = assign_line_indices(np.array([0.1, np.nan, 0.3, 0.4, 0.5]))
+    assert idx.tolist() == [0, 1, 2, 3, 4] and np.isnan(res)
+    from probreg.lanes.vanishing import _spacing_residual_px
+
+    assert np.isnan(_spacing_residual_px((), [0.1, np.inf, 0.3, 0.4], [0, 1, 2, 3], np.array([1.0, 0, 0]),
+                                         (1920, 1080)))
