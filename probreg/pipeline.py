@@ -389,7 +389,7 @@ def detect_athlete(clip, model_path, det_model=None, athlete=None, min_score=0.3
     """
     from .detect import detect_sequence, load_pose_model
     from .geometry import coco_to_h36m
-    from .io.frames import iter_frames
+    from .io.frames import iter_frames_counted
 
     model = load_pose_model(model_path)
     detector = load_pose_model(det_model) if det_model else None
@@ -405,19 +405,11 @@ def detect_athlete(clip, model_path, det_model=None, athlete=None, min_score=0.3
     if model.needs_box and detector is None and box is None:
         raise ValueError(f"{model_path} is a top-down model: it needs --det-model (a YOLO-pose model that finds "
                          f"the person) or --athlete x0,y0,x1,y1 (the athlete's box in the first frame)")
-    bar = progress("detection", clip.n_frames) if progress is not None else None
-
-    def frames():
-        for item in iter_frames(clip):
-            yield item
-            if bar is not None:
-                bar.update(1)
-
+    frames = iter_frames_counted(clip, progress, "detection")
     try:
-        coco = detect_sequence(frames(), model, detector, box=box, point=point, min_score=min_score)
+        coco = detect_sequence(frames, model, detector, box=box, point=point, min_score=min_score)
     finally:
-        if bar is not None:
-            bar.close()
+        frames.close()
     return coco_to_h36m(coco)
 
 

@@ -15,7 +15,7 @@ import numpy as np
 
 from ..geometry import JOINT_INDEX, Camera, distort_normalized
 from ..io.clip import Clip
-from ..io.frames import iter_frames
+from ..io.frames import iter_frames_counted
 from ..lanes import (
     FrameLanes,
     LaneDetectorConfig,
@@ -481,22 +481,14 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
     """
     kp = clip.keypoints_px if mask_athlete else None
     missing = set(clip.missing_images)
-    bar = progress("lanes", clip.n_frames) if progress is not None else None
-
-    def frames():
-        for item in iter_frames(clip):
-            yield item
-            if bar is not None:
-                bar.update(1)
-
+    frames = iter_frames_counted(clip, progress, "lanes")
     try:
         fls = [replace(fl, image_size=clip.image_size,
                        status="missing_image" if fl.frame in missing or i in missing else fl.status)
                if fl.status == "bad_image" else fl
-               for i, fl in enumerate(track_lanes(frames(), config, keypoints_px=kp))]
+               for i, fl in enumerate(track_lanes(frames, config, keypoints_px=kp))]
     finally:
-        if bar is not None:
-            bar.close()
+        frames.close()  # the progress bar
     return register_frames(fls, clip.image_size, (1.0, 0.0), clip.lane_width_m, smooth=smooth)
 
 

@@ -8,7 +8,7 @@ import cv2
 
 from .clip import Clip, ClipFormatError
 
-__all__ = ["iter_frames", "read_frame", "has_frames"]
+__all__ = ["iter_frames", "iter_frames_counted", "read_frame", "has_frames"]
 
 
 def has_frames(clip: Clip):
@@ -61,3 +61,18 @@ def iter_frames(clip: Clip, n_frames=None):
             yield i, (img if ok else None)
     finally:
         cap.release()
+
+
+def iter_frames_counted(clip: Clip, progress=None, desc="frames"):
+    """:func:`iter_frames`, counting the frames on a bar made by ``progress(desc, total)`` (an
+    object with ``update(n)`` and ``close()``, e.g. ``tqdm``); the bar is closed when the
+    iteration ends, is abandoned or fails."""
+    bar = progress(desc, clip.n_frames) if progress is not None else None
+    try:
+        for item in iter_frames(clip):
+            yield item
+            if bar is not None:
+                bar.update(1)
+    finally:
+        if bar is not None:
+            bar.close()
