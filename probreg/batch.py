@@ -59,10 +59,21 @@ SUMMARY_COLUMNS = ["clip", "name", "status", "error", "verdict", "verdict_reason
                    "knee_r_median_deg", "knee_band_width_deg", "camera_height_m", "camera_height_lo_m",
                    "camera_height_hi_m", "wall_s", "skipped"]
 
+def _defaults():
+    """The options of a batch entry with their ``probreg run`` defaults (read from the classes
+    that own them)."""
+    from .inference import SamplerSettings
+    from .pipeline import RunOptions
+
+    smp, run = SamplerSettings(), RunOptions()
+    return {"stature": None, "stature_sd": None, "height_m": None, "height_log_sd": None,
+            "camera_side": run.camera_side, "model": None, "det_model": None, "athlete": None, "fps": None,
+            "seed": smp.seed, "walkers": smp.n_walkers, "max_steps": smp.max_steps, "draws": smp.n_draws,
+            "dist": None, "min_score": run.min_score}
+
+
 #: options of a batch entry with their ``probreg run`` defaults
-DEFAULTS = {"stature": None, "stature_sd": None, "height_m": None, "height_log_sd": None, "camera_side": "auto",
-            "model": None, "det_model": None, "athlete": None, "fps": None, "seed": 0, "walkers": 24,
-            "max_steps": 8000, "draws": 60, "dist": None, "min_score": 0.3}
+DEFAULTS = _defaults()
 
 
 @dataclass
@@ -207,18 +218,15 @@ def run_entry(entry: BatchEntry, out_dir, digest):
         row["wall_s"] = time.perf_counter() - t0
         _stamp_wall_time(target, row["wall_s"])
         return row
-    except BaseException as exc:  # noqa: BLE001 -- fault isolation: every failure becomes a row
-        if isinstance(exc, (KeyboardInterrupt, SystemExit)):
-            raise
+    except Exception as exc:  # noqa: BLE001 -- fault isolation: every failure becomes a row
         return {"clip": str(entry.clip), "name": entry.name, "status": "failed",
                 "error": f"{type(exc).__name__}: {exc}".replace("\n", " ")[:500],
                 "wall_s": time.perf_counter() - t0, "skipped": "no"}
 
 
 def _stamp_wall_time(target, wall_s):
-    """Record the wall time in the result's ``run.json``-independent ``batch.json`` copy: kept in
-    ``summary.csv`` when the clip is skipped later.  (The result folder is complete already; a
-    kill here loses only this number.)"""
+    """Record the clip's wall time in its ``batch.json``, for ``summary.csv`` when a rerun skips the
+    clip.  (The result folder is complete already; a kill here loses only this number.)"""
     p = Path(target) / "batch.json"
     try:
         doc = json.loads(p.read_text())

@@ -29,26 +29,39 @@ class Key:
     help: str
 
 
+def _defaults():
+    """The built-in defaults, read from the classes that own them (never written twice)."""
+    from .inference import ModelPriors, SamplerSettings
+    from .pipeline import RunOptions
+
+    p, smp, run = ModelPriors(), SamplerSettings(), RunOptions()
+    return {"height_m": p.camera_height.median, "height_log_sd": p.camera_height.log_sd, "stature": p.stature.mean,
+            "stature_sd": p.stature.sd, "walkers": smp.n_walkers, "max_steps": smp.max_steps, "draws": smp.n_draws,
+            "seed": smp.seed, "camera_side": run.camera_side, "min_score": run.min_score}
+
+
+_D = _defaults()
+
 #: Every key of the file, with the command-line option it stands for.
 CONFIG_KEYS = (
-    Key("priors", "camera_height_m", "height_m", float, 9.0,
+    Key("priors", "camera_height_m", "height_m", float, _D["height_m"],
         "median of the camera-height prior (m): log-normal, 2-40 m at the default log-sd"),
-    Key("priors", "camera_height_log_sd", "height_log_sd", float, 0.8,
+    Key("priors", "camera_height_log_sd", "height_log_sd", float, _D["height_log_sd"],
         "log-sd of the camera-height prior (a small value such as 0.05 when the height is known)"),
-    Key("priors", "stature_m", "stature", float, 1.80, "mean of the athlete's stature prior (m)"),
-    Key("priors", "stature_sd", "stature_sd", float, 0.16,
+    Key("priors", "stature_m", "stature", float, _D["stature"], "mean of the athlete's stature prior (m)"),
+    Key("priors", "stature_sd", "stature_sd", float, _D["stature_sd"],
         "sd of the stature prior (m): 0.16 holds adults of 1.50-2.10 m; 0.02 when the stature is known"),
-    Key("sampler", "walkers", "walkers", int, 24, "emcee walkers"),
-    Key("sampler", "max_steps", "max_steps", int, 8000, "sampling budget (steps after burn-in)"),
-    Key("sampler", "draws", "draws", int, 60, "posterior draws propagated to angles (the bands)"),
-    Key("sampler", "seed", "seed", int, 0, "random seed (results are reproducible for a seed)"),
+    Key("sampler", "walkers", "walkers", int, _D["walkers"], "emcee walkers"),
+    Key("sampler", "max_steps", "max_steps", int, _D["max_steps"], "sampling budget (steps after burn-in)"),
+    Key("sampler", "draws", "draws", int, _D["draws"], "posterior draws propagated to angles (the bands)"),
+    Key("sampler", "seed", "seed", int, _D["seed"], "random seed (results are reproducible for a seed)"),
     Key("lens", "dist", "dist", list, [],
         "known lens distortion [k1, k2, p1, p2, k3] (OpenCV order); [] = none assumed"),
-    Key("camera", "side", "camera_side", str, "auto",
+    Key("camera", "side", "camera_side", str, _D["camera_side"],
         "'auto' (decided by the athlete's motion), 'main' (home-straight stands) or 'far' (across the infield)"),
     Key("detection", "model", "model", str, "", "ONNX pose model for videos (YOLO-pose or top-down); '' = none"),
     Key("detection", "det_model", "det_model", str, "", "ONNX person detector for a top-down model; '' = none"),
-    Key("detection", "min_score", "min_score", float, 0.3, "keypoints below this confidence are missing"),
+    Key("detection", "min_score", "min_score", float, _D["min_score"], "keypoints below this confidence are missing"),
 )
 
 

@@ -20,6 +20,7 @@ The pose model is ``--model PATH`` (default: ``probreg models export-yolo``'s ou
 
 from __future__ import annotations
 
+import json
 import subprocess
 import sys
 import tempfile
@@ -101,8 +102,6 @@ def run(args=None):
     with tempfile.TemporaryDirectory(prefix="probreg-bench-video-") as tmp:
         for name in names:
             clip = shared / "validation" / name
-            import json
-
             fps = json.loads((clip / "clip.json").read_text())["fps"]
             video = _mp4(clip / "frames", Path(tmp) / f"{name}.mp4", fps)
             out = Path(tmp) / f"{name}_result"
