@@ -116,8 +116,11 @@ def _run_options(args):
                                       stature=args.stature, stature_sd=args.stature_sd)
     sampler = SamplerSettings(n_walkers=args.walkers, max_steps=args.max_steps, n_draws=args.draws,
                               seed=args.seed)
+    from .calibration.lens import LensPrior
+
     return RunOptions(priors=priors, sampler=sampler, dist=_parse_dist(args.dist), min_score=args.min_score,
-                      overwrite=args.overwrite, camera_side=args.camera_side, progress=_progress(args))
+                      overwrite=args.overwrite, camera_side=args.camera_side, progress=_progress(args),
+                      lens=args.lens, lens_prior=LensPrior(sd=args.lens_k1_sd))
 
 
 def _cmd_run(args):
@@ -392,7 +395,13 @@ def _add_run_options(p):
     g.add_argument("--walkers", type=int, default=24)
     g.add_argument("--max-steps", type=int, default=8000, help="sampling budget (steps after burn-in)")
     g.add_argument("--draws", type=int, default=60, help="posterior draws propagated to angles")
-    g.add_argument("--dist", default=None, help="known lens distortion k1,k2,p1,p2,k3 (use --dist=...)")
+    g.add_argument("--dist", default=None, help="known lens distortion k1,k2,p1,p2,k3 (use --dist=...); "
+                                                "overrides --lens")
+    g.add_argument("--lens", choices=("infer", "none"), default="infer",
+                   help="without --dist: infer k1 from the lane lines' curvature and sample it in the posterior "
+                        "(default), or assume a lens without distortion")
+    g.add_argument("--lens-k1-sd", type=float, default=0.15,
+                   help="sd of the k1 prior (normal, mean 0, |k1| <= 0.5; default 0.15: broadcast zoom lenses)")
     g.add_argument("--min-score", type=float, default=0.3)
     g.add_argument("--camera-side", choices=("auto", "main", "far"), default="auto",
                    help="side of the track the camera stands on: main (home straight stands, runner goes "

@@ -37,7 +37,8 @@ def _defaults():
     p, smp, run = ModelPriors(), SamplerSettings(), RunOptions()
     return {"height_m": p.camera_height.median, "height_log_sd": p.camera_height.log_sd, "stature": p.stature.mean,
             "stature_sd": p.stature.sd, "walkers": smp.n_walkers, "max_steps": smp.max_steps, "draws": smp.n_draws,
-            "seed": smp.seed, "camera_side": run.camera_side, "min_score": run.min_score}
+            "seed": smp.seed, "camera_side": run.camera_side, "min_score": run.min_score, "lens": run.lens,
+            "lens_k1_sd": run.lens_prior.sd}
 
 
 _D = _defaults()
@@ -55,6 +56,9 @@ CONFIG_KEYS = (
     Key("sampler", "max_steps", "max_steps", int, _D["max_steps"], "sampling budget (steps after burn-in)"),
     Key("sampler", "draws", "draws", int, _D["draws"], "posterior draws propagated to angles (the bands)"),
     Key("sampler", "seed", "seed", int, _D["seed"], "random seed (results are reproducible for a seed)"),
+    Key("lens", "mode", "lens", str, _D["lens"],
+        "without a known lens (dist): 'infer' k1 from the lane lines, or 'none' (no distortion)"),
+    Key("lens", "k1_prior_sd", "lens_k1_sd", float, _D["lens_k1_sd"], "sd of the k1 prior (normal, mean 0)"),
     Key("lens", "dist", "dist", list, [],
         "known lens distortion [k1, k2, p1, p2, k3] (OpenCV order); [] = none assumed"),
     Key("camera", "side", "camera_side", str, _D["camera_side"],
@@ -141,6 +145,8 @@ def _convert(path, key, value):
             raise ConfigError(f"{where} must be a string, got {value!r}")
         if key.dest == "camera_side" and value not in ("auto", "main", "far"):
             raise ConfigError(f"{where} must be 'auto', 'main' or 'far', got {value!r}")
+        if key.dest == "lens" and value not in ("infer", "none"):
+            raise ConfigError(f"{where} must be 'infer' or 'none', got {value!r}")
         return value or None  # '' = not given
     if key.dest == "dist":
         if not isinstance(value, list) or (value and (len(value) != 5 or not all(

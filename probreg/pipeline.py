@@ -30,6 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from .analysis import GAIT_FIELDS
+from .calibration.lens import LensPrior, infer_lens, undistort_registration
 from .calibration.registration import camera_json, register_clip
 from .calibration.side import requested_side
 from .geometry import JOINT_NAMES
@@ -53,6 +54,10 @@ class RunOptions:
     priors: ModelPriors = field(default_factory=ModelPriors)
     sampler: SamplerSettings = field(default_factory=SamplerSettings)
     dist: tuple | None = None
+    # the lens when ``dist`` is not given: "infer" (k1 from the lane lines' curvature, sampled in
+    # the posterior; :mod:`probreg.calibration.lens`) or "none" (assumed free of distortion)
+    lens: str = "infer"
+    lens_prior: LensPrior = field(default_factory=LensPrior)
     min_score: float = 0.3
     branch: str = "narrow"
     report: bool = True
@@ -94,7 +99,7 @@ def _arviz():
     return az
 
 
-def posterior_inference_data(sampler, burn=0, keypoints_px=None, frame_lanes=None):
+def posterior_inference_data(sampler, burn=0, keypoints_px=None, frame_lanes=None, names=PARAM_NAMES):
     """ArviZ InferenceData from the emcee sampler (walkers as chains; ``posterior`` and
     ``sample_stats.lp`` as ``az.from_emcee`` makes them, built directly from the arrays, which is
     ~70x faster), with the observed keypoints and vanishing points as ``observed_data`` and
@@ -102,7 +107,7 @@ def posterior_inference_data(sampler, burn=0, keypoints_px=None, frame_lanes=Non
     az = _arviz()
 
     chain = sampler.get_chain()[burn:]  # (draw, chain, D)
-    idata = az.from_dict(posterior={n: chain[:, :, i].T for i, n in enumerate(PARAM_NAMES)},
+    idata = az.from_dict(posterior={n: chain[:, :, i].T for i, n in enumerate(names)},
                          sample_stats={"lp": sampler.get_log_prob()[burn:].T},
                          attrs={"inference_library": "emcee"})
     post = idata.posterior
@@ -128,7 +133,7 @@ def posterior_inference_data(sampler, burn=0, keypoints_px=None, frame_lanes=Non
     return idata
 
 
-def _diagnostics(sampler, tau, idata):
+def _diagnostics(sampler, tau, idata, names=PARAM_NAMES):
     az = _arviz()
 
     post = idata.posterior[["log_height", "stature"]]
@@ -136,7 +141,7 @@ def _diagnostics(sampler, tau, idata):
     rhat = az.rhat(post)
     return {
         "acceptance_fraction": float(np.mean(sampler.acceptance_fraction)),
-        "tau": {n: float(t) for n, t in zip(PARAM_NAMES, tau)},
+        "tau": {n: float(t) for n, t in zip(names, tau)},
         "steps": int(sampler.iteration),
         "walkers": int(sampler.nwalkers),
         "steps_per_tau": float(sampler.iteration / np.max(tau)) if np.all(np.isfinite(tau)) else float("nan"),
@@ -145,6 +150,18 @@ def _diagnostics(sampler, tau, idata):
         "rhat_height": float(rhat["log_height"]),
         "rhat_stature": float(rhat["stature"]),
     }
+
+
+def _lens_summary(options, lens, flat):
+    """The lens of a run for ``camera.json`` (``k1``: median and 90 % interval) and ``run.json``:
+    inferred (the posterior's ``k1`` draws), given (``--dist``) or assumed free of distortion."""
+    if lens is not None:
+        k1 = flat[:, -1]
+        lo, med, hi = np.percentile(k1, [5, 50, 95])
+        return {"source": "inferred", "median": float(med), "lo": float(lo), "hi": float(hi),
+                "prior_interval": list(options.lens_prior.interval(0.9)), **lens.to_dict()}
+    k1 = float(options.dist[0]) if options.dist is not None else 0.0
+    return {"source": "given" if options.dist is not None else "assumed", "median": k1, "lo": k1, "hi": k1}
 
 
 def _frame_status(lanes, camera, inconsistent, gap_distance):
@@ -243,9 +260,19 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     side = reg.orient(options.priors.camera_height.centre(), clip.keypoints_px, options.branch, fps=clip.fps,
                       given=given)
     log(f"camera side: {side.chosen} ({side.source}; log-evidence ratio {side.log_ratio:.1f})")
+    lens = None
+    model_reg = reg
+    if options.dist is None and options.lens == "infer":
+        lens = infer_lens(reg, options.lens_prior, height_m=options.priors.camera_height.centre())
+        if lens is not None:
+            model_reg = undistort_registration(reg, lens)
+            log(f"lens: k1 from the lane lines (corner shift {lens.kappa_star * lens.evidence.r_ref:+.2f} px "
+                f"at the best fit; {lens.evidence.n_frames} frames, {lens.evidence.n_lines} lines)")
+    elif options.lens not in ("infer", "none"):
+        raise ValueError(f"lens must be 'infer' or 'none', got {options.lens!r}")
     try:
-        model = ClipModel(reg, clip.keypoints_px, clip.fps, clip.athlete_lane, priors=options.priors,
-                          dist=options.dist, branch=options.branch)
+        model = ClipModel(model_reg, clip.keypoints_px, clip.fps, clip.athlete_lane, priors=options.priors,
+                          dist=options.dist, branch=options.branch, lens=lens)
     except NoCalibrationError as exc:
         return _write_uncalibrated(clip, reg, side, out_dir, options, str(exc), t0, log, inputs, extra_files)
     sampler, tau = model.sample(options.sampler, progress=options.progress)
@@ -255,10 +282,12 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     draws = flat[rng.choice(len(flat), min(options.sampler.n_draws, len(flat)), replace=False)]
     prop = model.propagate(draws, rng, bootstrap_noise=options.sampler.bootstrap_noise, progress=options.progress)
     joints, gait = prop["joints"], prop["gait"]
-    idata = posterior_inference_data(sampler, keypoints_px=clip.keypoints_px, frame_lanes=reg.frame_lanes)
-    diag = _diagnostics(sampler, tau, idata)
+    idata = posterior_inference_data(sampler, keypoints_px=clip.keypoints_px, frame_lanes=reg.frame_lanes,
+                                     names=model.param_names)
+    diag = _diagnostics(sampler, tau, idata, names=model.param_names)
     h = np.exp(flat[:, 0])
     height = {"median": float(np.median(h)), "lo": float(np.percentile(h, 5)), "hi": float(np.percentile(h, 95))}
+    lens_doc = _lens_summary(options, lens, flat)
     import warnings
 
     with warnings.catch_warnings():
@@ -291,6 +320,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                   {k: v[1] for k, v in summ.items()}, {k: v[2] for k, v in summ.items()})
         write_gait_cycle_csv(tmp / "gait_cycle.csv", cycles)
         cj = camera_json(cam_list, height["median"], clip.n_frames, height["lo"], height["hi"])
+        cj["k1"] = {k: lens_doc[k] for k in ("median", "lo", "hi", "source")}
         write_json(tmp / "camera.json", cj)
         idata.to_netcdf(str(tmp / "posterior.nc"))
         write_json(tmp / "gait.json", gait_s)
@@ -302,6 +332,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                                      "camera_side": side.to_dict(),
                                      "input_notes": list(clip.notes), **extra,
                                      "diagnostics": diag, "timings_s": timings, "height_m": height,
+                                     "lens": lens_doc,
                                      "frame_status": status, "noise_px": model.noise_sd,
                                      "noise_rho": model.noise_rho, "n_draws": len(draws),
                                      "priors": {"camera_height": repr(options.priors.camera_height),

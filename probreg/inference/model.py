@@ -119,6 +119,11 @@ class ClipModel(DrawPropagation):
     priors : ModelPriors
     dist : array_like (5,), optional
         Known lens distortion.
+    lens : LensModel, optional
+        The lens inferred from the lanes (:class:`probreg.calibration.lens.LensModel`): the
+        registration's lines are already undistorted with its ``kappa_star``, and ``k1``
+        becomes the last parameter of the posterior (prior: ``lens.prior``; likelihood: the
+        plumb-line evidence at ``k1 (r_ref / f_ref(h))**2``).
     n_grid : int
         Heights on which the height-dependent statistics are precomputed.
     track_weight : float
@@ -134,9 +139,12 @@ class ClipModel(DrawPropagation):
 
     def __init__(self, registration: ClipRegistration, keypoints_px, fps, athlete_lane=None,
                  priors: ModelPriors = ModelPriors(), dist=None, n_grid=36, branch="narrow",
-                 track_weight=0.2):
+                 track_weight=0.2, lens=None):
         t0 = time.perf_counter()
         self.reg = registration
+        self.lens = lens
+        if lens is not None and dist is not None and np.any(dist):
+            raise ValueError("a clip model takes a known lens (dist) or an inferred one (lens), not both")
         self.fps = float(fps)
         self.priors = priors
         self.dist = None if dist is None else np.asarray(dist, float)
@@ -171,6 +179,8 @@ class ClipModel(DrawPropagation):
         self._precompute()
         theta = np.column_stack([np.log(self.grid), np.full(n_grid, priors.stature.centre()),
                                  np.ones((n_grid, len(SEGMENTS)))])
+        if self.lens is not None:
+            theta = np.column_stack([theta, self.k1_at(self.grid)])
         saved = self.track_weight
         self.track_weight = 0.0
         lp = self.log_prob(theta)
@@ -180,6 +190,19 @@ class ClipModel(DrawPropagation):
         self._fix_offsets(final=True)
         self._precompute()
         self.timings = {"precompute_s": time.perf_counter() - t0}
+
+    @property
+    def param_names(self):
+        """Names of the posterior's parameters (``k1`` last when the lens is inferred)."""
+        return PARAM_NAMES + (["k1"] if self.lens is not None else [])
+
+    def k1_at(self, height_m):
+        """``k1`` the lines' undistortion implies at ``height_m`` (the family's reference focal
+        length there); 0 without an inferred lens."""
+        if self.lens is None:
+            return np.zeros_like(np.asarray(height_m, float))
+        f = np.exp(self._interp(np.log(self.f_ref_grid), np.log(height_m)))
+        return self.lens.evidence.k1_of(self.lens.kappa_star, f)
 
     # ------------------------------------------------------------------ cameras as a function of h
     def _build_branches(self, n=500):
@@ -309,8 +332,16 @@ class ClipModel(DrawPropagation):
                 self.gap_distance[i] = min(i - a, b - i)
         C = np.column_stack([np.zeros(F), y, np.full(F, height_m)])
         C[~valid] = np.nan
-        return CameraArrays(valid=valid, C=C, R=R, focal_px=f, principal_px=self.pp,
-                            dist=np.zeros(5) if self.dist is None else self.dist)
+        if self.lens is not None:
+            # the lines were undistorted in pixels (kappa_star / zoom_i**2 per frame); the
+            # OpenCV k1 of that at these focal lengths (one per clip: the zoom ratios cancel)
+            ev = self.lens.evidence
+            with np.errstate(invalid="ignore"):
+                k1 = np.nanmedian(ev.k1_of(self.lens.kappa_star, f / ev.zoom)) if valid.any() else 0.0
+            dist = np.array([k1 if np.isfinite(k1) else 0.0, 0.0, 0.0, 0.0, 0.0])
+        else:
+            dist = np.zeros(5) if self.dist is None else self.dist
+        return CameraArrays(valid=valid, C=C, R=R, focal_px=f, principal_px=self.pp, dist=dist)
 
     def _fix_offsets(self, final=False):
         """Lane-index offsets (frame to frame and to the athlete's lane) at the reference height."""
@@ -353,8 +384,13 @@ class ClipModel(DrawPropagation):
         self.stance_windows = self._stance_windows()
         slides = np.full((G, len(self.stance_windows)), np.nan)
         n_frames = max(int(self.valid.sum()), 1)
+        # the clip's reference focal length (zoom ratios removed) at every grid height
+        self.f_ref_grid = np.full(G, np.nan)
+        zoom = self.lens.evidence.zoom if self.lens is not None else np.ones(self.F)
         for g, h in enumerate(self.grid):
             cams = self.cameras_at(h)
+            if cams.valid.any():
+                self.f_ref_grid[g] = float(np.nanmedian(cams.focal_px[cams.valid] / zoom[cams.valid]))
             if cams.valid.sum() < 3:
                 continue
             tr = fit_ground_track(cams, self.kp, self.fps, contacts=self.contacts,
@@ -501,8 +537,11 @@ class ClipModel(DrawPropagation):
         lp = self.priors.camera_height.logpdf(h) + theta[:, 0]  # Jacobian of h = exp(log h)
         lp = lp + self.priors.stature.logpdf(theta[:, 1])
         sd = self.priors.proportion_sd
-        lp = lp + np.sum(-0.5 * ((theta[:, 2:] - 1.0) / sd) ** 2, axis=1)
-        lp = np.where((theta[:, 1] > 0.5) & np.all(theta[:, 2:] > 0.5, axis=1), lp, -np.inf)
+        m = theta[:, 2:2 + len(SEGMENTS)]
+        lp = lp + np.sum(-0.5 * ((m - 1.0) / sd) ** 2, axis=1)
+        lp = np.where((theta[:, 1] > 0.5) & np.all(m > 0.5, axis=1), lp, -np.inf)
+        if self.lens is not None:
+            lp = lp + self.lens.prior.logpdf(theta[:, -1])
         return lp
 
     def log_likelihood(self, theta):
@@ -519,6 +558,11 @@ class ClipModel(DrawPropagation):
             se = self._interp(self.seg_se[s], lh)
             # a height at which a seen segment cannot be measured is not a free pass
             ll = ll - 0.5 * ((obs - L[s]) / se) ** 2 - np.log(se)
+        if self.lens is not None:
+            # plumb-line evidence: the image-space distortion this k1 makes at this height's focal length
+            with np.errstate(invalid="ignore"):
+                f = np.exp(self._interp(np.log(self.f_ref_grid), lh))
+                ll = ll + self.lens.evidence.log_likelihood(self.lens.evidence.kappa_of(theta[:, -1], f))
         return np.where(np.isfinite(ll), ll, -np.inf)
 
     def log_prob(self, theta):
@@ -537,6 +581,8 @@ class ClipModel(DrawPropagation):
         for g, h in enumerate(self.grid):
             st = self.priors.stature.centre()
             th = np.r_[np.log(h), st, np.ones(len(SEGMENTS))]
+            if self.lens is not None:
+                th = np.r_[th, float(self.k1_at(h))]
             theta_grid.append(th)
         lp = self.log_prob(np.array(theta_grid))
         g = int(np.nanargmax(np.where(np.isfinite(lp), lp, -np.inf)))
@@ -547,6 +593,8 @@ class ClipModel(DrawPropagation):
             base[1] = obs
         step = np.log(self.grid[1] / self.grid[0]) if len(self.grid) > 1 else 0.05
         scale = np.r_[step, 0.02, np.full(len(SEGMENTS), 0.02)]
+        if self.lens is not None:
+            scale = np.r_[scale, 0.002 + 0.01 * abs(base[-1])]
         p0 = base + rng.normal(0, 1, (n, len(base))) * scale
         # every walker must start where the posterior is positive
         for _ in range(50):
@@ -564,7 +612,7 @@ class ClipModel(DrawPropagation):
         import emcee
 
         rng = np.random.default_rng(settings.seed)
-        D = len(PARAM_NAMES)
+        D = len(self.param_names)
         if settings.n_walkers < 2 * D:
             raise ValueError(f"emcee's stretch move needs at least {2 * D} walkers for {D} parameters, "
                              f"got {settings.n_walkers}")

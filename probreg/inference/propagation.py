@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+from dataclasses import replace
 
 import numpy as np
 
@@ -90,6 +91,10 @@ class DrawPropagation:
             rng = np.random.default_rng(int(seeds[s]))
             h = float(np.exp(draws[s, 0]))
             cams = self._jitter_bridged(self.cameras_at(h), rng)
+            if getattr(self, "lens", None) is not None:
+                # the draw's own lens: its k1 undistorts the keypoints (the lines' undistortion,
+                # and so the family, stays that of the lens model's kappa_star: first order)
+                cams = replace(cams, dist=np.array([float(draws[s, -1]), 0.0, 0.0, 0.0, 0.0]))
             seg = {k: float(v[s]) for k, v in L.items()}
             variants = [("_point", self.kp)]
             if with_noise:

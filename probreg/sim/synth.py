@@ -207,6 +207,11 @@ PRESETS = {
                       offset_frac=(0.0, 0.0)),
     "distorted": _preset(None, dist=lambda r: (_u(r, -0.12, -0.04), _u(r, 0.0, 0.05), 0.0, 0.0, 0.0),
                          athlete_height_px=lambda r: _u(r, 200, 300)),
+    # a broadcast zoom lens at its wide end, close to the track: |k1| 0.1-0.25, either sign
+    # (the lens development set of issue 27; the held-out set's wide near views are separate)
+    "wide_lens": _preset(None, distance_m=lambda r: _u(r, 10, 25), height_m=lambda r: _u(r, 3, 10),
+                         athlete_height_px=lambda r: _u(r, 150, 250), fov_range_deg=(2.0, 35.0),
+                         dist=lambda r: (float(r.choice([-1.0, 1.0])) * _u(r, 0.1, 0.25), 0.0, 0.0, 0.0, 0.0)),
 }
 
 #: Fixed clip suites: name -> list of (clip name, preset, seed).
@@ -219,6 +224,8 @@ SUITES = {
         ("distorted_a", "distorted", 112), ("run_b", "run", 113), ("fast_b", "fast", 114),
     ],
     "mini": [("run_a", "run", 102), ("fast_a", "fast", 103), ("square_a", "square", 111)],
+    # wide distorted near views for the lens (issue 27): developed on, unlike the held-out set
+    "lens": [(f"lens_{k}", "wide_lens", 600 + k) for k in range(1, 9)],
 }
 
 def config_from_preset(name, seed, n_frames=None, **overrides):
