@@ -163,9 +163,10 @@ def _cmd_sensitivity(args):
     from .sensitivity import distortion_study, parse_k1_list
 
     study = distortion_study(args.clip, args.out, parse_k1_list(args.k1), _run_options(args),
-                             reference_k1=args.reference_k1)
+                             reference_k1=args.reference_k1, infer=not args.no_infer)
     print(study.to_markdown(), end="")
-    print(f"results: {args.out} (sensitivity.md, sensitivity.json, sensitivity.csv; one result folder per k1)")
+    print(f"results: {args.out} (sensitivity.md, sensitivity.json, sensitivity.csv, sensitivity.png, "
+          f"decomposition.png; one result folder per k1{'' if args.no_infer else ' and lens_inferred/'})")
     return 0
 
 
@@ -494,6 +495,8 @@ def build_parser():
                     help="radial coefficients to try, OpenCV normalised coordinates (write --k1=-0.2,0,0.2)")
     sv.add_argument("--reference-k1", type=float, default=None,
                     help="hypothesis the others are compared with (default: the k1 of --dist, else 0)")
+    sv.add_argument("--no-infer", action="store_true",
+                    help="skip the run with the lens inferred from the lanes (lens_inferred/)")
     _add_run_options(sv)
     sv.set_defaults(func=_cmd_sensitivity)
 

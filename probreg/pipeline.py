@@ -88,6 +88,9 @@ class RunResult:
     # (angle, side) -> (cycle_pct, median, lo, hi, n_cycles): gait_cycle.csv
     gait_cycle: dict = field(default_factory=dict)
     frame_status: list = field(default_factory=list)
+    # run.json's "lens" and "band_decomposition"
+    lens: dict = field(default_factory=dict)
+    band_decomposition: dict = field(default_factory=dict)
 
 
 def _arviz():
@@ -150,6 +153,14 @@ def _diagnostics(sampler, tau, idata, names=PARAM_NAMES):
         "rhat_height": float(rhat["log_height"]),
         "rhat_stature": float(rhat["stature"]),
     }
+
+
+#: how ``run.json``'s ``band_decomposition`` is computed (written beside it)
+DECOMPOSITION_METHOD = (
+    "one group at a time: lens (k1), camera (height), limbs (stature, proportions) vary over 16 posterior draws "
+    "with the others at their posterior medians; the point liftings' variance (mean over frames) is the group's "
+    "part; keypoints: the variance the bootstrap of the detector noise adds; shares = parts / their sum; "
+    "parts_over_total = sum of parts / the band's variance (interactions are not attributed)")
 
 
 def _lens_summary(options, lens, flat):
@@ -282,6 +293,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     draws = flat[rng.choice(len(flat), min(options.sampler.n_draws, len(flat)), replace=False)]
     prop = model.propagate(draws, rng, bootstrap_noise=options.sampler.bootstrap_noise, progress=options.progress)
     joints, gait = prop["joints"], prop["gait"]
+    decomposition = model.band_decomposition(draws, prop, rng)
     idata = posterior_inference_data(sampler, keypoints_px=clip.keypoints_px, frame_lanes=reg.frame_lanes,
                                      names=model.param_names)
     diag = _diagnostics(sampler, tau, idata, names=model.param_names)
@@ -332,7 +344,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                                      "camera_side": side.to_dict(),
                                      "input_notes": list(clip.notes), **extra,
                                      "diagnostics": diag, "timings_s": timings, "height_m": height,
-                                     "lens": lens_doc,
+                                     "lens": lens_doc, "band_decomposition": decomposition,
+                                     "band_decomposition_method": DECOMPOSITION_METHOD,
                                      "frame_status": status, "noise_px": model.noise_sd,
                                      "noise_rho": model.noise_rho, "n_draws": len(draws),
                                      "priors": {"camera_height": repr(options.priors.camera_height),
@@ -340,7 +353,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
                            gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
                            verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,
-                           frame_status=status)
+                           frame_status=status, lens=lens_doc, band_decomposition=decomposition)
         if options.report:
             from .report.html import run_report
 

@@ -25,9 +25,12 @@ moves pixels far less at a narrow field of view; the table also gives each
 hypothesis as the displacement of the image corner in pixels at the clip's
 median focal length, which is what can be compared between zoom levels.
 
-Every hypothesis writes a complete result folder (``OUT/k1_+0.100/...``);
-``OUT/sensitivity.json``, ``sensitivity.csv`` and ``sensitivity.md`` hold the
-comparison.
+Every hypothesis writes a complete result folder (``OUT/k1_+0.100/...``), and so does a
+run with the lens inferred from the lanes (``OUT/lens_inferred``: ``k1`` sampled in the
+posterior, :mod:`probreg.calibration.lens`); ``OUT/sensitivity.json``, ``sensitivity.csv`` and
+``sensitivity.md`` hold the comparison, ``sensitivity.png`` each angle's band with the lens
+inferred against every fixed ``k1``, and ``decomposition.png`` the shares of the inferred run's
+bands due to the lens, the camera, the limbs and the keypoints.
 """
 
 from __future__ import annotations
@@ -112,6 +115,8 @@ class DistortionStudy:
     reference_k1: float
     out_dir: Path
     plumb_line: dict = field(default_factory=dict)
+    # the run with the lens inferred from the lanes (k1 interval, angles, band_decomposition)
+    inferred: dict = field(default_factory=dict)
 
     def row(self, k1):
         for r in self.rows:
@@ -157,6 +162,23 @@ class DistortionStudy:
                       + ("; at the edge of the grid, so the lanes favour a value beyond it" if p["at_edge"] else "")
                       + (f"; the curve varies by only {p['range_px']:.3f} px over the grid, so the lanes hardly "
                          "constrain the lens here" if p["range_px"] < 0.02 else "") + "."]
+        inf = self.inferred
+        if inf.get("angles"):
+            k = inf["k1"]
+            lines += ["", f"Lens inferred from the lanes (``lens_inferred/``): k1 {k['median']:+.3f} "
+                      f"(90 % interval {k['lo']:+.3f} to {k['hi']:+.3f}).", "",
+                      "| angle | band, lens inferred (deg) | "
+                      + " | ".join(f"band, k1 {r['k1']:+.3f}" for r in self.rows)
+                      + " | inferred vs reference: mean change (deg) | lens / camera / limbs / keypoints share |",
+                      "|---|---|" + "---|" * len(self.rows) + "---|---|"]
+            for name, a in inf["angles"].items():
+                d = inf.get("band_decomposition", {}).get(name) or {}
+                share = " / ".join(f"{d[g]:.2f}" if d.get(g) is not None else "-"
+                                   for g in ("lens", "camera", "limbs", "keypoints"))
+                lines.append(f"| {name} | {a['mean_band_deg']:.1f} | "
+                             + " | ".join(f"{r['angles'].get(name, {}).get('mean_band_deg', float('nan')):.1f}"
+                                          for r in self.rows)
+                             + f" | {a['mean_abs_change_deg']:.2f} | {share} |")
         return "\n".join(lines) + "\n"
 
 
@@ -231,7 +253,7 @@ def plumb_line_summary(k1_grid, curve):
 
 
 def distortion_study(clip_dir, out_dir, k1_values, options: RunOptions = RunOptions(), reference_k1=None,
-                     log=print):
+                     log=print, infer=True):
     """Run the pipeline once per hypothesised ``k1`` and compare the results.
 
     Parameters
@@ -249,6 +271,10 @@ def distortion_study(clip_dir, out_dir, k1_values, options: RunOptions = RunOpti
         Hypothesis the others are compared with (added to the runs when missing);
         default: the nominal ``k1`` when ``options.dist`` is given, else 0 if it is
         among the values, else the first value.
+    infer : bool
+        Also run the clip with the lens inferred from its lanes (``OUT/lens_inferred``): its
+        ``k1`` interval, each angle's band against those of the fixed ``k1`` runs and the band
+        decomposition (``sensitivity.png``, ``decomposition.png``).
 
     Returns
     -------
@@ -270,11 +296,60 @@ def distortion_study(clip_dir, out_dir, k1_values, options: RunOptions = RunOpti
     ks = sorted([k for k in ks if abs(k - reference_k1) >= 5e-4] + [reference_k1])
     out_dir = Path(out_dir)
     with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=[clip_dir], log=log) as tmp:
-        study = _study_into(tmp, clip_dir, ks, base, reference_k1, options, log)
+        study = _study_into(tmp, clip_dir, ks, base, reference_k1, options, log, infer=infer)
     return replace(study, out_dir=out_dir)
 
 
-def _study_into(out_dir, clip_dir, ks, base, reference_k1, options, log):
+def _inferred_run(out_dir, clip_dir, options, ref_res, log):
+    """The clip run with the lens inferred from its lanes (``OUT/lens_inferred``): its ``k1``
+    interval, every angle's band and change against the reference, the band decomposition."""
+    sub = out_dir / "lens_inferred"
+    log(f"k1 inferred from the lanes: {sub}")
+    res = run_clip(clip_dir, sub, replace(options, dist=None, lens="infer", overwrite=False), log=log)
+    angles = {}
+    for name in ANGLES:
+        if name not in res.angle_summary or name not in ref_res.angle_summary:
+            continue
+        med, lo, hi = res.angle_summary[name]
+        diff = np.abs(med - ref_res.angle_summary[name][0])
+        ok = np.isfinite(diff)
+        angles[name] = {"mean_deg": float(np.nanmean(med)),
+                        "mean_abs_change_deg": float(np.mean(diff[ok])) if ok.any() else float("nan"),
+                        "max_abs_change_deg": float(np.max(diff[ok])) if ok.any() else float("nan"),
+                        "mean_band_deg": float(np.nanmean(hi - lo))}
+    return {"k1": {k: res.lens.get(k) for k in ("median", "lo", "hi", "source")}, "height_m": dict(res.height),
+            "angles": angles, "band_decomposition": res.band_decomposition, "result_dir": sub.name}
+
+
+def _figures(out_dir, study):
+    """``sensitivity.png`` (each angle's mean band width: lens inferred and every fixed k1) and
+    ``decomposition.png`` (where the inferred run's bands come from)."""
+    from .report.html import _subplots, decomposition_figure
+
+    names = [a for a in ANGLES if all(a in r["angles"] for r in study.rows)]
+    if not names:
+        return
+    series = [(f"k1 {r['k1']:+.3f}", [r["angles"][a]["mean_band_deg"] for a in names]) for r in study.rows]
+    if study.inferred.get("angles"):
+        k = study.inferred["k1"]
+        series.insert(0, (f"inferred {k['median']:+.3f} [{k['lo']:+.3f}, {k['hi']:+.3f}]",
+                          [study.inferred["angles"].get(a, {}).get("mean_band_deg", np.nan) for a in names]))
+    fig, ax = _subplots(1, 1, figsize=(max(6.0, 1.3 * len(names) + 3), 3.8))
+    x = np.arange(len(names))
+    w = 0.8 / len(series)
+    for j, (label, vals) in enumerate(series):
+        ax.bar(x + (j - (len(series) - 1) / 2) * w, vals, width=w, label=label)
+    ax.set_xticks(x, names)
+    ax.set_ylabel("mean 90 % band width (deg)")
+    ax.legend(fontsize=7, loc="upper left", bbox_to_anchor=(1.0, 1.0))
+    fig.tight_layout()
+    fig.savefig(out_dir / "sensitivity.png", dpi=110)
+    if study.inferred.get("band_decomposition"):
+        decomposition_figure(study.inferred["band_decomposition"], title="lens inferred").savefig(
+            out_dir / "decomposition.png", dpi=110)
+
+
+def _study_into(out_dir, clip_dir, ks, base, reference_k1, options, log, infer=True):
     """Run every hypothesis into ``out_dir`` (the study's temporary folder) and write the summaries."""
     runs = {}
     for k1 in ks:
@@ -326,9 +401,12 @@ def _study_into(out_dir, clip_dir, ks, base, reference_k1, options, log):
     grid = np.linspace(lo - pad, hi + pad, 41)
     curve = lane_straightness_curve(ref_res.model.reg.frame_lanes, _focal(ref_cams), grid, base)
     plumb = {**plumb_line_summary(grid, curve), "cameras_of_k1": float(k_cam)}
-    study = DistortionStudy(rows=rows, reference_k1=reference_k1, out_dir=out_dir, plumb_line=plumb)
+    inferred = _inferred_run(out_dir, clip_dir, options, ref_res, log) if infer else {}
+    study = DistortionStudy(rows=rows, reference_k1=reference_k1, out_dir=out_dir, plumb_line=plumb,
+                            inferred=inferred)
     write_json(out_dir / "sensitivity.json", {"reference_k1": study.reference_k1, "rows": rows,
-                                              "plumb_line": plumb})
+                                              "plumb_line": plumb, "inferred": inferred})
+    _figures(out_dir, study)
     with open(out_dir / "sensitivity.csv", "w", newline="") as fh:
         wr = csv.writer(fh)
         wr.writerow(["k1", "corner_shift_px", "lane_straightness_px", "height_m", "height_lo_m", "height_hi_m",

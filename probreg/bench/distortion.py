@@ -1,121 +1,300 @@
-"""Lens distortion: what ignoring it costs, what knowing it recovers, how sensitive results are.
+"""Lens distortion: the lens inferred from the lane lines, against the true lens given and the
+lens ignored.
 
-Two clips, generated here with fixed seeds:
+Clips (all end to end through the command line, ``probreg run``, in fresh processes):
 
-* ``wide_k25``: preset ``wide`` (seed 501; FOV about 30 deg, camera 6.9 m high and
-  22 m from the athlete's lane) rendered through a strongly barrel-distorted
-  lens, ``k1 = -0.25`` (the image corner moves about 26 px at the true focal length);
-* ``distorted_a``: the benchmark suite's distorted clip (preset ``distorted``,
-  seed 112; FOV about 10 deg, ``k1 = -0.063``: the corner moves < 1 px).
+* the **lens suite** (``probreg synth --suite lens``, 8 wide near views from the broadened
+  generator: camera 3-10 m high and 10-25 m from the lane, athlete 150-250 px, hFOV up to
+  35 deg, ``|k1|`` 0.1-0.25 of either sign; 100 frames each; developed on);
+* three **narrow** clips of the benchmark suite's set-ups (``tele_a``, ``run_a``,
+  ``distorted_a``; 100 frames): the lens must not make them worse;
+* the **validation** clips ``v03_near_high``, ``v04_wide`` and ``v05_distorted`` of
+  ``../shared/data/validation`` (independent generator; checked, never tuned on).
 
-Each is run through ``probreg sensitivity`` (the whole pipeline per hypothesised
-``k1``, default priors, the other coefficients at their true values) and every
-hypothesis is scored against the ground truth as in ``bench posterior``: knee
-error of the posterior median, pelvis-aligned MPJPE, camera height, location
-and FOV.  The lane straightness column is the evidence the frames themselves
-give (RMS px of the lane support points from straight lines after undistortion
-under the hypothesis): the true lens should leave the straightest lines.
+Each clip is run three ways: ``inferred`` (the default: ``k1`` from the lines, sampled in the
+posterior), ``given`` (``--dist`` with the true coefficients) and ``ignored`` (``--lens none``:
+no distortion assumed, which was the default before the lens was inferred).  Scores as in
+``bench posterior`` (knee error of the posterior median, pelvis-aligned MPJPE, camera height,
+FOV) plus the ``k1`` interval of ``camera.json`` and the band decomposition of ``run.json``.
+
+Then the seed paper's 14 frames (``../shared/data/paper_frames``): the plumb-line evidence of
+each frame alone (its lines, no other frame), as the image-space distortion at the image
+corner with its 90 % interval, to see whether the frames of the same broadcast agree.
 """
 
 from __future__ import annotations
 
+import json
+import os
+import subprocess
+import sys
 import tempfile
 import time
-from dataclasses import replace
+from concurrent.futures import ThreadPoolExecutor
 from pathlib import Path
 
 import numpy as np
 
-from ..inference import ModelPriors
 from ..io.clip import load_groundtruth
-from ..pipeline import RunOptions, run_clip
-from ..sensitivity import distortion_study, lane_straightness_curve, plumb_line_summary
 from ..sim import config_from_preset, synthesize, write_clip
-from .common import BenchReport, md_table
+from ..sim.synth import SUITES, write_suite
+from .common import BenchReport, find_shared_data, md_table
 from .posterior import score_result
 
-__all__ = ["run", "CLIPS"]
+__all__ = ["run", "NARROW", "VALIDATION", "CLIPS", "make_clip"]
 
-#: name -> (preset, seed, k1 override or None, hypotheses)
-CLIPS = {
-    "wide_k25": ("wide", 501, -0.25, [-0.4, -0.25, -0.1, 0.0, 0.1]),
-    "distorted_a": ("distorted", 112, None, [-0.2, 0.0, 0.2]),
-}
+#: fixed clips for tests: name -> (preset, seed, k1 override)
+CLIPS = {"wide_k25": ("wide", 501, -0.25)}
 
 
 def make_clip(name, out_dir, n_frames=250):
-    """Generate one of :data:`CLIPS` (with images) into ``out_dir``."""
-    preset, seed, k1, _ = CLIPS[name]
+    """Generate one of :data:`CLIPS` (with images) into ``out_dir``: ``wide_k25`` is preset ``wide``
+    (seed 501; FOV about 30 deg) through a strong barrel lens, ``k1 = -0.25``."""
+    from dataclasses import replace
+
+    preset, seed, k1 = CLIPS[name]
     cfg = config_from_preset(preset, seed, n_frames=n_frames)
     if k1 is not None:
         cfg = replace(cfg, camera=replace(cfg.camera, dist=(k1, 0.0, 0.0, 0.0, 0.0)))
     return write_clip(synthesize(cfg, seed=seed, preset=preset), out_dir, images=True, overwrite=True)
 
+#: narrow clips: (name, preset, seed) as in the benchmark suite
+NARROW = [(n, p, s) for n, p, s in SUITES["bench"] if n in ("tele_a", "run_a", "distorted_a")]
+#: validation clips with a lens
+VALIDATION = ("v03_near_high", "v04_wide", "v05_distorted")
+MODES = ("inferred", "given", "ignored")
+
+
+def _mode_args(mode, dist):
+    if mode == "given":
+        return ["--dist=" + ",".join(repr(float(v)) for v in dist)]
+    if mode == "ignored":
+        return ["--lens", "none"]
+    return []
+
+
+def _cli(clip, out, extra):
+    """``probreg run`` in a fresh single-core process; (exit code, wall s)."""
+    env = dict(os.environ, PROBREG_WORKERS="1", OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
+    cmd = [sys.executable, "-m", "probreg", "run", str(clip), "--out", str(out), "--seed", "0", "--quiet", *extra]
+    t0 = time.perf_counter()
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    return proc.returncode, time.perf_counter() - t0, proc.stderr.strip().splitlines()[-1:] if proc.stderr else []
+
+
+def _score(clip, out):
+    s = score_result(clip, out)
+    cam = json.loads((Path(out) / "camera.json").read_text())
+    run = json.loads((Path(out) / "run.json").read_text())
+    s["k1"] = cam.get("k1", {})
+    s["verdict"] = run.get("verdict")
+    s["decomposition"] = run.get("band_decomposition", {})
+    return s
+
+
+def _clips(args, tmp):
+    """(set, name, clip folder) of every clip, generated where needed."""
+    out = []
+    root = Path(args.suite_dir) if getattr(args, "suite_dir", None) else Path(tmp)
+    lens_root = root / "lens"
+    if not all((lens_root / n / "clip.json").exists() for n, _, _ in SUITES["lens"]):
+        write_suite("lens", lens_root, n_frames=100, overwrite=True)
+    out += [("lens", n, lens_root / n) for n, _, _ in SUITES["lens"]]
+    for name, preset, seed in NARROW:
+        d = root / "narrow" / name
+        if not (d / "clip.json").exists():
+            write_clip(synthesize(config_from_preset(preset, seed, n_frames=100), seed=seed, preset=preset), d,
+                       images=True, overwrite=True)
+        out.append(("narrow", name, d))
+    data = find_shared_data(getattr(args, "shared", None))
+    if data is not None and (data / "validation").is_dir():
+        out += [("validation", n, data / "validation" / n) for n in VALIDATION if (data / "validation" / n).is_dir()]
+    return out
+
+
+def _paper_frames(data, rep):
+    """Per-frame plumb-line evidence on the seed paper's frames."""
+    import cv2
+
+    from ..calibration.lens import plumb_line_evidence
+    from ..lanes import detect_lanes
+
+    folder = data / "paper_frames" if data is not None else None
+    if folder is None or not folder.is_dir():
+        rep.add("## Seed paper frames\n\nNot available (../shared/data/paper_frames missing).\n")
+        return {}
+    rows, vals = [], {}
+    for p in sorted(folder.glob("*.jp*g")):
+        fl = detect_lanes(cv2.imread(str(p)))
+        ev = plumb_line_evidence([fl]) if fl.ok else None
+        if ev is None:
+            rows.append([p.name, fl.status, "n/a", "n/a", "n/a"])
+            continue
+        w = np.exp(ev.loglik - ev.loglik.max()) * np.gradient(ev.kappa)
+        c = np.cumsum(w) / w.sum()
+        lo, med, hi = np.interp([0.05, 0.5, 0.95], c, ev.kappa) * ev.r_ref
+        camera = p.stem.split(".")[0].split("_cam")[1] if "_cam" in p.stem else "1"
+        vals[p.name] = (camera, med, lo, hi)
+        rows.append([p.name, f"{len(fl.lines)} lines", f"cam {camera}", med, f"[{lo:+.2f}, {hi:+.2f}]"])
+    rep.add("## Seed paper frames: is the inferred lens consistent across frames?\n")
+    rep.add("Each frame alone (its own lines): the corner shift (px; the image-space distortion "
+            "``kappa * r_ref``) the plumb-line evidence puts at the median, with its 90 % interval. "
+            "``cam`` is the camera of the paper's renders named in the file (frames without a suffix: "
+            "the default camera).\n")
+    rep.add(md_table(["frame", "lanes", "camera", "corner shift px (median)", "90 % interval px"], rows,
+                     floatfmt="{:+.3f}"))
+    by_cam = {}
+    for cam, med, lo, hi in vals.values():
+        by_cam.setdefault(cam, []).append((med, lo, hi))
+    lines = []
+    for cam, v in sorted(by_cam.items()):
+        v = np.array(v)
+        common = bool(np.max(v[:, 1]) <= np.min(v[:, 2]))
+        lines.append(f"* camera {cam}: {len(v)} frames, medians {v[:, 0].min():+.2f} to {v[:, 0].max():+.2f} px; "
+                     f"one value inside every frame's interval: {'yes' if common else 'no'}")
+    rep.add("\n".join(lines) + "\n")
+    return {"per_frame": {k: list(v) for k, v in vals.items()}}
+
 
 def run(args=None):
-    rep = BenchReport("distortion", "Lens distortion: ignoring it, knowing it, sensitivity to it")
+    rep = BenchReport("distortion", "Lens distortion: inferred from the lanes, given, ignored")
     rep.add(__doc__.split("\n\n", 1)[1])
-    numbers = {}
+    jobs = max(1, int(getattr(args, "jobs", None) or 2))
     with tempfile.TemporaryDirectory() as tmp:
-        for name, (_, _, _, hyps) in CLIPS.items():
-            clip = make_clip(name, Path(tmp) / name)
-            gt = load_groundtruth(clip)
-            true = np.asarray(gt.cameras[0].dist, float)
-            ks = sorted(set(float(k) for k in hyps))  # the true k1 (the reference) is added by the study
-            t0 = time.perf_counter()
-            study = distortion_study(clip, Path(tmp) / f"{name}_sens", ks,
-                                     RunOptions(report=False, dist=tuple(true)), log=lambda *a: None)
-            dt = time.perf_counter() - t0
-            rows = []
-            for r in study.rows:
-                s = score_result(clip, study.out_dir / r["result_dir"])
-                rows.append([f"{r['k1']:+.3f}" + (" (true)" if np.isclose(r["k1"], true[0], atol=1e-4) else ""),
-                             r["corner_shift_px"], r["lane_straightness_px"], s["knee_deg"], s["mpjpe_cm"],
-                             s["height_pct"], s["loc_pct"], s["fov_deg"],
-                             r["angles"]["knee_l"]["mean_abs_change_deg"] / 2
-                             + r["angles"]["knee_r"]["mean_abs_change_deg"] / 2])
-                numbers.setdefault(name, {})[f"{r['k1']:+.3f}"] = {
-                    "knee_deg": s["knee_deg"], "mpjpe_cm": s["mpjpe_cm"], "height_pct": s["height_pct"],
-                    "fov_deg": s["fov_deg"], "lane_straightness_px": r["lane_straightness_px"]}
-            fov = float(np.median([c.fov_deg for c in gt.cameras]))
-            rep.add(f"## {name}: true k1 = {true[0]:+.3f}, FOV {fov:.1f} deg, athlete "
-                    f"{gt.athlete['stature_m']:.2f} m (prior mean 1.76 m); {len(study.rows)} runs in {dt:.0f} s\n")
-            rep.add(md_table(["k1 assumed", "corner shift px", "lane straightness px", "knee err deg", "MPJPE cm",
-                              "height err %", "location err %", "FOV err deg",
-                              "knee change vs true-k1 run deg"], rows, floatfmt="{:.3f}"))
-            best = min(study.rows, key=lambda r: np.nan_to_num(r["lane_straightness_px"], nan=np.inf))
-            p = study.plumb_line
-            rep.add(f"Straightest lane lines among the runs: k1 = {best['k1']:+.3f}. Plumb-line check on a "
-                    f"41-value grid ({p['k1_grid'][0]:+.3f} to {p['k1_grid'][-1]:+.3f}) with the cameras of the "
-                    f"straightest run (k1 = {p['cameras_of_k1']:+.3f}): straightest at k1 = {p.get('best_k1', float('nan')):+.3f} "
-                    f"(curve range {p.get('range_px', float('nan')):.3f} px).\n")
-            numbers[name]["plumb_line_k1"] = p.get("best_k1")
-            # the same with the athlete's stature known (sd 2 cm): the metric scale no longer rests
-            # on the stature prior, so what is left is the geometry of the lens hypothesis
-            st = float(gt.athlete["stature_m"])
-            priors = ModelPriors.from_options(stature=st, stature_sd=0.02)
-            rows2 = []
-            for k1 in (float(true[0]), 0.0):
-                d = true.copy()
-                d[0] = k1
-                opts = RunOptions(report=False, priors=priors, dist=tuple(d) if np.any(d) else None)
-                res = run_clip(clip, Path(tmp) / f"{name}_stature_{k1:+.3f}", opts, log=lambda *a: None)
-                s2 = score_result(clip, res.out_dir)
-                rows2.append([f"{k1:+.3f}" + (" (true)" if k1 == float(true[0]) else ""), s2["knee_deg"],
-                              s2["mpjpe_cm"], s2["height_pct"], s2["loc_pct"], s2["fov_deg"]])
-                numbers[name][f"stature_known_{k1:+.3f}"] = {k: s2[k] for k in ("knee_deg", "mpjpe_cm",
-                                                                               "height_pct", "fov_deg")}
-                if k1 == float(true[0]):
-                    cams = res.model.cameras_at(res.height["median"])
-                    grid = np.asarray(p["k1_grid"])
-                    curve = lane_straightness_curve(res.model.reg.frame_lanes,
-                                                    np.where(cams.valid, cams.focal_px, np.nan), grid, true)
-                    k_pl = plumb_line_summary(grid, curve)["best_k1"]
-                    numbers[name]["plumb_line_k1_stature_known"] = k_pl
-            rep.add(f"With the athlete's stature known ({st:.2f} m, sd 2 cm):\n")
-            rep.add(md_table(["k1 assumed", "knee err deg", "MPJPE cm", "height err %", "location err %",
-                              "FOV err deg"], rows2, floatfmt="{:.3f}"))
-            rep.add(f"Plumb-line check with these cameras: straightest at k1 = {k_pl:+.3f} (the k1 it reports "
-                    "scales with the square of the focal length the run estimated).\n")
+        clips = _clips(args, tmp)
+        tasks = []
+        for set_, name, clip in clips:
+            dist = np.asarray(load_groundtruth(clip).cameras[0].dist, float)
+            modes = MODES if set_ != "narrow" or np.any(dist) else ("inferred", "ignored")
+            for mode in modes:
+                tasks.append((set_, name, clip, mode, Path(tmp) / "out" / f"{name}_{mode}", _mode_args(mode, dist)))
+        t0 = time.perf_counter()
+        with ThreadPoolExecutor(jobs) as pool:
+            done = list(pool.map(lambda t: _cli(t[2], t[4], t[5]), tasks))
+        wall_all = time.perf_counter() - t0
+        res = {}
+        for (set_, name, clip, mode, out, _), (rc, wall, err) in zip(tasks, done):
+            r = {"rc": rc, "wall_s": wall, "err": err}
+            if rc in (0, 3):
+                r.update(_score(clip, out))
+            res[(name, mode)] = r
+        numbers = _tables(rep, clips, res)
+        numbers["wall_all_s"] = wall_all
+        numbers["paper_frames"] = _paper_frames(find_shared_data(getattr(args, "shared", None)), rep)
+    rep.add(f"All {len(tasks)} runs took {wall_all:.0f} s ({jobs} at a time, one core each).\n")
     rep.numbers = numbers
     return rep
+
+
+def _fmt_k1(k):
+    if not k or k.get("median") is None:
+        return "n/a"
+    if k.get("source") != "inferred":
+        return f"{k['median']:+.3f} ({k.get('source')})"
+    return f"{k['median']:+.3f} [{k['lo']:+.3f}, {k['hi']:+.3f}]"
+
+
+def _tables(rep, clips, res):
+    numbers = {"clips": {}}
+    for set_ in ("lens", "narrow", "validation"):
+        names = [(n, c) for s, n, c in clips if s == set_]
+        if not names:
+            continue
+        rows = []
+        for name, clip in names:
+            gt = load_groundtruth(clip)
+            k1 = float(gt.cameras[0].dist[0])
+            fov = float(np.median([c.fov_deg for c in gt.cameras]))
+            for mode in MODES:
+                r = res.get((name, mode))
+                if r is None:
+                    continue
+                if "knee_deg" not in r:
+                    rows.append([name, f"{k1:+.3f}", fov, mode, f"failed (exit {r['rc']})", *["n/a"] * 7, r["wall_s"]])
+                    continue
+                rows.append([name, f"{k1:+.3f}", fov, mode, _fmt_k1(r["k1"]), r["knee_deg"], r["knee_coverage"],
+                             r["mpjpe_cm"], r["height_pct"], "yes" if r["height_in_interval"] else "no", r["fov_deg"],
+                             r["verdict"], r["wall_s"]])
+                numbers["clips"][f"{name}/{mode}"] = {k: r[k] for k in ("knee_deg", "knee_coverage", "mpjpe_cm",
+                                                                       "height_pct", "fov_deg", "wall_s")} | {
+                    "k1": r["k1"], "k1_true": k1, "hfov_deg": fov}
+        title = {"lens": "Lens suite (wide near views, |k1| 0.1-0.25)", "narrow": "Narrow clips (the lens must not hurt)",
+                 "validation": "Validation clips with a lens (independent generator)"}[set_]
+        rep.add(f"## {title}\n")
+        rep.add(md_table(["clip", "true k1", "hFOV deg", "lens", "k1 (camera.json, 90 %)", "knee err deg",
+                          "knee coverage", "MPJPE cm", "height err %", "height in 90 %", "FOV err deg", "verdict",
+                          "wall s"], rows, floatfmt="{:.2f}"))
+    _targets(rep, clips, res, numbers)
+    _decomposition(rep, clips, res)
+    return numbers
+
+
+def _targets(rep, clips, res, numbers):
+    wide = []
+    for s, name, clip in clips:
+        gt = load_groundtruth(clip)
+        k1 = float(gt.cameras[0].dist[0])
+        fov = float(np.median([c.fov_deg for c in gt.cameras]))
+        if abs(k1) >= 0.1 and fov >= 15 and s != "narrow":
+            wide.append((name, k1))
+    hits, rel_ok, abs_ok, n = [], [], [], 0
+    for name, k1 in wide:
+        inf, giv = res.get((name, "inferred"), {}), res.get((name, "given"), {})
+        if "k1" not in inf:
+            hits.append(False)
+            abs_ok.append(False)
+            rel_ok.append(False)
+            continue
+        k = inf["k1"]
+        hits.append(bool(k.get("lo") is not None and k["lo"] <= k1 <= k["hi"]))
+        abs_ok.append(bool(inf["mpjpe_cm"] <= 8.0 and inf["height_pct"] <= 5.0))
+        if "mpjpe_cm" in giv:
+            rel_ok.append(bool(inf["mpjpe_cm"] <= 1.1 * giv["mpjpe_cm"]
+                               and inf["height_pct"] <= max(1.1 * giv["height_pct"], giv["height_pct"] + 0.5)))
+        n += 1
+    narrow = [(n_, res.get((n_, "inferred"), {}), res.get((n_, "ignored"), {})) for s, n_, _ in clips if s == "narrow"]
+    d_knee = [a["knee_deg"] - b["knee_deg"] for _, a, b in narrow if "knee_deg" in a and "knee_deg" in b]
+    d_mpjpe = [a["mpjpe_cm"] - b["mpjpe_cm"] for _, a, b in narrow if "mpjpe_cm" in a and "mpjpe_cm" in b]
+    walls = [(res[(n_, "inferred")]["wall_s"], res[(n_, "ignored")]["wall_s"]) for _, n_, _ in clips
+             if (n_, "inferred") in res and (n_, "ignored") in res]
+    ratio = float(np.median([a / b for a, b in walls])) if walls else float("nan")
+    rows = [
+        ["k1 90 % interval holds the true k1 (|k1| >= 0.1, hFOV >= 15 deg)", "85-95 % of clips",
+         f"{sum(hits)}/{len(hits)} ({100 * np.mean(hits):.0f} %)" if hits else "n/a",
+         "yes" if hits and 0.85 <= np.mean(hits) <= 0.95 else "no"],
+        ["lens inferred within 10 % of the true lens given (MPJPE and height error)", "every such clip",
+         f"{sum(rel_ok)}/{len(rel_ok)}", "yes" if rel_ok and all(rel_ok) else "no"],
+        ["lens inferred: MPJPE <= 8 cm and height <= 5 %", "every such clip", f"{sum(abs_ok)}/{len(abs_ok)}",
+         "yes" if abs_ok and all(abs_ok) else "no"],
+        ["narrow clips: inferred minus ignored, knee deg / MPJPE cm", "within noise",
+         ("max |dknee| %.2f, max |dMPJPE| %.2f" % (np.max(np.abs(d_knee)), np.max(np.abs(d_mpjpe))))
+         if d_knee else "n/a", "yes" if d_knee and max(np.abs(d_knee)) <= 0.3 and max(np.abs(d_mpjpe)) <= 0.5 else "no"],
+        ["run time inferred / ignored (median over clips)", "<= 1.5", f"{ratio:.2f}", "yes" if ratio <= 1.5 else "no"],
+    ]
+    rep.add("## Targets (issue 27)\n")
+    rep.add(md_table(["target", "wanted", "measured", "met"], rows))
+    rep.add("Within noise for the narrow clips is taken as 0.3 deg knee and 0.5 cm MPJPE (the spread of "
+            "reruns with other seeds on the suite); 'within 10 %' as MPJPE at most 1.1x and height error at most "
+            "1.1x (or 0.5 percentage points) that of the run given the true lens.\n")
+    numbers["targets"] = {"k1_hits": int(sum(hits)), "k1_n": len(hits), "rel_ok": int(sum(rel_ok)),
+                          "rel_n": len(rel_ok), "abs_ok": int(sum(abs_ok)), "abs_n": len(abs_ok),
+                          "narrow_dknee": d_knee, "narrow_dmpjpe": d_mpjpe, "time_ratio": ratio}
+
+
+def _decomposition(rep, clips, res):
+    rows = []
+    for s, name, _ in clips:
+        r = res.get((name, "inferred"), {})
+        d = r.get("decomposition") or {}
+        for a in ("knee_l", "knee_r"):
+            v = d.get(a) or {}
+            if v.get("camera") is None:
+                continue
+            rows.append([name, a, v["lens"], v["camera"], v["limbs"], v["keypoints"], v.get("parts_over_total")])
+    if rows:
+        rep.add("## Where the knee bands come from (lens inferred; run.json band_decomposition)\n")
+        rep.add(md_table(["clip", "angle", "lens", "camera", "limbs", "keypoints", "parts / total"], rows))
+        rep.add("The lens share is the part of the band the draws' ``k1`` makes through the keypoints' "
+                "undistortion with the camera held; the lines' undistortion (and so the family) is that of "
+                "the lens's best fit, so what the remaining lens uncertainty does to the camera appears "
+                "under camera (``k1`` and the height move together: ``k1 = kappa (f(h) / r_ref)^2``).\n")

@@ -3,6 +3,7 @@
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import replace
 
 import numpy as np
@@ -47,13 +48,71 @@ class DrawPropagation:
             the point liftings, ``gait`` from the noisy ones (contacts detected anew).
         """
         t0 = time.perf_counter()
+        with_noise = bootstrap_noise and np.isfinite(self.noise_sd) and self.noise_sd > 0
+        out = self._lift_draws(draws, rng, with_noise, config, workers, progress)
+        self.timings["propagation_s"] = time.perf_counter() - t0
+        return out
+
+    def band_decomposition(self, draws, prop, rng, n=16, config: LiftConfig = LiftConfig(), workers=None):
+        """Where each angle's band comes from: shares of its variance due to the ``lens``
+        (``k1``), the ``camera`` (height, i.e. the family member), the ``limbs`` (stature and
+        segment proportions) and the ``keypoints`` (2D detector noise).
+
+        Method (documented in ``run.json``): one group at a time varies over ``n`` of the
+        posterior draws while the others are held at their posterior medians, and the point
+        liftings' variance across those draws (mean over frames) is that group's part (a
+        local, first-order variance decomposition; interactions are not attributed); the
+        keypoints' part is what the bootstrap adds to the point liftings' variance
+        (``prop``: the output of :meth:`propagate`).  The shares are the parts over their sum;
+        ``parts_over_total`` compares that sum with the band's full variance (near 1 when the
+        groups act independently).  Without an inferred lens its share is 0.
+
+        Returns
+        -------
+        dict {angle: {"lens", "camera", "limbs", "keypoints", "parts_over_total"}}
+        """
+        t0 = time.perf_counter()
+        draws = np.asarray(draws, float)
+        n = min(int(n), len(draws))
+        med = np.median(draws, axis=0)
+        nseg = draws.shape[1] - 2 - (1 if getattr(self, "lens", None) is not None else 0)
+        groups = {"camera": [0], "limbs": list(range(1, 2 + nseg))}
+        if getattr(self, "lens", None) is not None:
+            groups["lens"] = [draws.shape[1] - 1]
+        parts = {k: {} for k in ("lens", "camera", "limbs", "keypoints")}
+        with np.errstate(invalid="ignore"), warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN frames of an angle
+            for g, cols in groups.items():
+                theta = np.tile(med, (n, 1))
+                theta[:, cols] = draws[:n, cols]
+                res = self._lift_draws(theta, rng, False, config, workers, None)["angles_point"]
+                for a in ANGLE_NAMES:
+                    parts[g][a] = float(np.nanmean(np.nanvar(res[a], axis=0)))
+            for a in ANGLE_NAMES:
+                parts["keypoints"][a] = float(max(np.nanmean(np.nanvar(prop["angles"][a], axis=0)
+                                                             - np.nanvar(prop["angles_point"][a], axis=0)), 0.0))
+                if "lens" not in groups:
+                    parts["lens"][a] = 0.0
+            out = {}
+            for a in ANGLE_NAMES:
+                v = {g: parts[g][a] for g in parts}
+                tot = sum(x for x in v.values() if np.isfinite(x))
+                full = float(np.nanmean(np.nanvar(prop["angles"][a], axis=0)))
+                if not (tot > 0 and np.isfinite(tot)):
+                    out[a] = {g: None for g in parts} | {"parts_over_total": None}
+                    continue
+                out[a] = {g: (float(x / tot) if np.isfinite(x) else 0.0) for g, x in v.items()}
+                out[a]["parts_over_total"] = float(tot / full) if full > 0 else None
+        self.timings["decomposition_s"] = time.perf_counter() - t0
+        return out
+
+    def _lift_draws(self, draws, rng, with_noise, config, workers, progress):
         S = len(draws)
         cross = config.cross_stride_angles
         cross = self.stride_lag is not None if cross == "auto" else bool(cross)
         cfg = LiftConfig(**{**config.__dict__, "smooth_cutoff_hz": None, "cross_stride_angles": cross})
         L = self.lengths(draws)
         seeds = rng.integers(0, 2**63 - 1, size=S)
-        with_noise = bootstrap_noise and np.isfinite(self.noise_sd) and self.noise_sd > 0
         job = (draws, L, seeds, cfg, with_noise, self._joint_noise_scale() if with_noise else None)
         workers = max(1, min(_default_workers() if workers is None else int(workers), S))
         # a few chunks per worker: the progress bar moves, and a slow chunk does not hold the rest
@@ -81,7 +140,6 @@ class DrawPropagation:
                 for key in ("gait", "gait_point"):
                     for k, v in res[key].items():
                         out[key].setdefault(k, np.full(S, np.nan))[s] = v
-        self.timings["propagation_s"] = time.perf_counter() - t0
         return out
 
     def _propagate_draws(self, indices, draws, L, seeds, cfg, with_noise, per_joint):

@@ -242,6 +242,21 @@ def run_report(out_html, clip, result, joints_median, cameras):
         rep.figure(gait_cycle_figure(result.gait_cycle),
                    "Joint angles over the gait cycle (touchdown to touchdown of the same foot, 0-100 %; mean over "
                    "the clip's cycles), posterior median with its 90 % credible band over draws (gait_cycle.csv)")
+    dec = getattr(result, "band_decomposition", None)
+    if dec:
+        rep.figure(decomposition_figure(dec), "Where the bands come from: share of each angle's band variance due "
+                   "to the lens (k1), the camera (height), the limbs (bone lengths) and the keypoints (2D detector "
+                   "noise); run.json band_decomposition, method in band_decomposition_method")
+    lens = getattr(result, "lens", None)
+    if lens:
+        if lens.get("source") == "inferred":
+            rep.paragraph(f"Lens: k1 {lens['median']:+.3f} (90 % interval {lens['lo']:+.3f} to {lens['hi']:+.3f}; "
+                          f"prior {lens['prior_interval'][0]:+.2f} to {lens['prior_interval'][1]:+.2f}), inferred "
+                          f"from the curvature of {lens['n_lines']} lane lines in {lens['n_frames']} frames"
+                          + ("" if lens.get("informative") else "; the lines show no curvature a plausible lens "
+                             "could make (narrow view), so k1 keeps its prior and hardly matters") + ".", cls="note")
+        else:
+            rep.paragraph(f"Lens: k1 {lens['median']:+.3f} ({lens['source']}).", cls="note")
     rep.heading("Gait")
     rep.table(["quantity", "median", "5 %", "95 %", "unit"],
               [[k, v["median"], v["lo"], v["hi"], GAIT_FIELDS.get(k, "")] for k, v in result.gait.items()])
@@ -425,5 +440,30 @@ def sampler_figure(idata, max_points=800):
         axes[row, 1].set_ylabel("walker")
         axes[row, 1].set_xlabel("rank among all draws (fraction)" if row == 1 else "")
     axes[1, 0].set_xlabel("step")
+    fig.tight_layout()
+    return fig
+
+
+#: the groups of a band decomposition, in the order (and colours) they are stacked
+DECOMPOSITION_GROUPS = (("lens", "tab:purple"), ("camera", "tab:blue"), ("limbs", "tab:green"),
+                        ("keypoints", "tab:orange"))
+
+
+def decomposition_figure(decomposition, angles=("knee_l", "knee_r", "hip_l", "hip_r", "elbow_l", "elbow_r"),
+                         title=None):
+    """Stacked bars: for each angle, the shares of its band's variance due to the lens, the
+    camera, the limbs and the keypoints (``run.json`` ``band_decomposition``)."""
+    names = [a for a in angles if decomposition.get(a) and decomposition[a].get("camera") is not None]
+    fig, ax = _subplots(1, 1, figsize=(max(4.0, 1.1 * len(names) + 2.5), 3.6))
+    bottom = np.zeros(len(names))
+    for g, col in DECOMPOSITION_GROUPS:
+        v = np.array([decomposition[a].get(g) or 0.0 for a in names])
+        ax.bar(names, v, bottom=bottom, color=col, label=g, width=0.6)
+        bottom += v
+    ax.set_ylim(0, 1.0)
+    ax.set_ylabel("share of band variance")
+    ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
+    if title:
+        ax.set_title(title, fontsize=9)
     fig.tight_layout()
     return fig

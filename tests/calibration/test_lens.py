@@ -1,0 +1,159 @@
+"""The lens from the lane lines (issue 27): plumb-line evidence and k1 in the posterior."""
+
+import numpy as np
+import pytest
+
+from probreg.calibration.lens import (
+    LensPrior,
+    distort_px,
+    kappa_grid,
+    plumb_line_evidence,
+    undistort_px,
+)
+from probreg.geometry import Camera
+from probreg.lanes.types import FrameLanes, LaneLine, _fit_line
+
+
+def _noisy(fl, rng, sd):
+    lines = []
+    for ln in fl.lines:
+        p = ln.points_px + rng.normal(0, sd, ln.points_px.shape)
+        lines.append(LaneLine(line=_fit_line(p), points_px=p, rms_px=sd, index=ln.index))
+    return FrameLanes(status="ok", lines=tuple(lines), vanishing_point=fl.vanishing_point, image_size=fl.image_size)
+
+
+def _interval(ev, focal, p=0.9):
+    """k1 interval of the plumb-line evidence alone (flat prior in kappa) at ``focal``."""
+    w = np.exp(ev.loglik - ev.loglik.max()) * np.gradient(ev.kappa)
+    c = np.cumsum(w) / w.sum()
+    lo, hi = np.interp([(1 - p) / 2, (1 + p) / 2], c, ev.kappa)
+    return float(ev.k1_of(lo, focal)), float(ev.k1_of(hi, focal))
+
+
+def test_pixel_distortion_round_trip_and_opencv_equivalence():
+    c = np.array([959.5, 539.5])
+    rng = np.random.default_rng(0)
+    p = rng.uniform([0, 0], [1920, 1080], (50, 2))
+    for q in (-6e-8, 0.0, 6e-8):  # k1 = -+0.25 at f = 2000 px
+        assert np.allclose(distort_px(undistort_px(p, c, q), c, q), p, atol=1e-8)
+    # q = k1 / f**2 in pixels is OpenCV's k1 on normalised coordinates
+    cam = Camera.look_at([30.0, -25.0, 7.0], [45.0, -5.0, 0.5], fov_deg=30.0, dist=[-0.2, 0, 0, 0, 0])
+    ideal = cam.with_(dist=np.zeros(5))
+    P = np.array([[40.0, -3.0, 0.0], [50.0, -8.0, 1.0], [38.0, -1.0, 0.5]])
+    q = -0.2 / cam.focal_px**2
+    assert np.allclose(distort_px(ideal.project(P), cam.K[:2, 2], q), cam.project(P), atol=1e-6)
+
+
+@pytest.mark.parametrize("k1", [-0.2, -0.1, 0.12])
+def test_bent_lines_give_back_k1_within_the_interval(distorted_lanes, k1):
+    rng = np.random.default_rng(3)
+    cam = Camera.look_at([30.0, -25.0, 7.0], [45.0, -5.0, 0.5], fov_deg=30.0, dist=[k1, 0, 0, 0, 0])
+    # 30 frames of the same view, support points with 0.1 px detection noise
+    frames = [_noisy(distorted_lanes(cam), rng, 0.1) for _ in range(30)]
+    ev = plumb_line_evidence(frames)
+    lo, hi = _interval(ev, cam.focal_px)
+    assert lo <= k1 <= hi
+    assert hi - lo < 0.05  # and the lines do pin it
+    assert ev.informative(LensPrior(), cam.focal_px)
+
+
+def test_narrow_view_evidence_is_flat_over_the_prior(distorted_lanes):
+    # a 1 deg telephoto view: even k1 = 0.25 moves the image corner by ~0.03 px; the lines cannot tell
+    rng = np.random.default_rng(4)
+    cam = Camera.look_at([45.0, -90.0, 12.0], [45.0, -4.3, 0.0], fov_deg=1.0, dist=[0.0, 0, 0, 0, 0])
+    frames = [_noisy(distorted_lanes(cam, n_lines=5), rng, 0.1) for _ in range(30)]
+    ev = plumb_line_evidence(frames)
+    prior = LensPrior()
+    assert not ev.informative(prior, cam.focal_px)
+    lo, hi = prior.interval(0.9)
+    k = ev.kappa_of(np.linspace(lo, hi, 21), cam.focal_px)
+    assert np.ptp(ev.log_likelihood(k)) < 0.5
+
+
+def test_kappa_grid_is_symmetric_and_dense_near_zero():
+    g = kappa_grid()
+    assert np.allclose(g, -g[::-1]) and 0.0 in g
+    assert np.min(np.diff(g)) < 1e-4 < 1e-3 < np.max(np.diff(g)) and g[-1] == pytest.approx(0.4)
+
+
+def test_no_lines_no_evidence():
+    fl = FrameLanes(status="no_lines", lines=(), vanishing_point=None, image_size=(1280, 720))
+    assert plumb_line_evidence([fl, fl]) is None
+
+
+def test_prior_covers_broadcast_lenses():
+    p = LensPrior()
+    lo, hi = p.interval(0.9)
+    assert lo < -0.2 and hi > 0.2
+    assert np.isinf(p.logpdf(0.55))
+
+
+@pytest.fixture(scope="module")
+def noisy_wide_lens_clip(tmp_path_factory):
+    """The same view with the generator's detector noise."""
+    from probreg.sim import config_from_preset, synthesize, write_clip
+
+    out = tmp_path_factory.mktemp("lens") / "wide_noisy"
+    write_clip(synthesize(config_from_preset("wide_lens", 601, n_frames=50), seed=601, preset="wide_lens"), out,
+               images=True, jobs=1)
+    return out
+
+
+@pytest.fixture(scope="module")
+def wide_lens_clip(tmp_path_factory):
+    """A 50-frame wide near view through a barrel lens (k1 = -0.19), exact keypoints."""
+    from dataclasses import replace as dc_replace
+
+    from probreg.sim import config_from_preset, synthesize, write_clip
+    from probreg.sim.synth import DetectorNoise
+
+    cfg = dc_replace(config_from_preset("wide_lens", 601, n_frames=50), noise=DetectorNoise.ideal())
+    out = tmp_path_factory.mktemp("lens") / "wide"
+    write_clip(synthesize(cfg, seed=601, preset="wide_lens"), out, images=True, jobs=1)
+    return out
+
+
+def test_run_infers_the_lens_and_decomposes_the_bands(wide_lens_clip, tmp_path):
+    import json
+
+    from probreg.inference import SamplerSettings
+    from probreg.io import load_groundtruth
+    from probreg.pipeline import RunOptions, run_clip
+
+    fast = SamplerSettings(n_walkers=20, burn_in=100, chunk=150, max_steps=600, n_draws=12, seed=1)
+    res = run_clip(wide_lens_clip, tmp_path / "out", RunOptions(sampler=fast, report=False), log=lambda *a: None)
+    k_true = float(load_groundtruth(wide_lens_clip).cameras[0].dist[0])
+    cam = json.loads((tmp_path / "out" / "camera.json").read_text())
+    k = cam["k1"]
+    assert k["source"] == "inferred" and k["lo"] <= k_true <= k["hi"] and k["hi"] - k["lo"] < 0.15
+    # the posterior's k1 is in posterior.nc too
+    assert "k1" in res.posterior.posterior
+    run = json.loads((tmp_path / "out" / "run.json").read_text())
+    dec = run["band_decomposition"]
+    assert set(dec) >= {"knee_l", "knee_r", "hip_l", "hip_r", "elbow_l", "elbow_r"}
+    for name in ("knee_l", "knee_r", "hip_l", "hip_r"):
+        shares = [dec[name][g] for g in ("lens", "camera", "limbs", "keypoints")]
+        assert sum(shares) == pytest.approx(1.0, abs=1e-9) and min(shares) >= 0
+        # exact keypoints: next to nothing of the band is detector noise (the noise model still
+        # reads a trace from the rendered motion; a noisy clip's share is > 0.15, below)
+        assert dec[name]["keypoints"] < 0.1
+    assert run["lens"]["informative"] and "band_decomposition_method" in run
+
+
+def test_lens_none_is_recorded_and_noise_shows_in_the_decomposition(noisy_wide_lens_clip, tmp_path):
+    import json
+
+    from probreg.inference import SamplerSettings
+    from probreg.pipeline import RunOptions, run_clip
+
+    fast = SamplerSettings(n_walkers=20, burn_in=100, chunk=150, max_steps=400, n_draws=8, seed=1)
+    run_clip(noisy_wide_lens_clip, tmp_path / "none", RunOptions(sampler=fast, report=False, lens="none"),
+             log=lambda *a: None)
+    k = json.loads((tmp_path / "none" / "camera.json").read_text())["k1"]
+    assert k == {"median": 0.0, "lo": 0.0, "hi": 0.0, "source": "assumed"}
+    dec = json.loads((tmp_path / "none" / "run.json").read_text())["band_decomposition"]
+    assert dec["knee_l"]["lens"] == 0.0
+    assert dec["knee_l"]["keypoints"] > 0.15 and dec["knee_r"]["keypoints"] > 0.15
+    with pytest.raises(ValueError, match="lens must be"):
+        run_clip(noisy_wide_lens_clip, tmp_path / "bad", RunOptions(sampler=fast, report=False, lens="guess"),
+                 log=lambda *a: None)
