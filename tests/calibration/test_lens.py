@@ -134,26 +134,28 @@ def test_run_infers_the_lens_and_decomposes_the_bands(wide_lens_clip, tmp_path):
     for name in ("knee_l", "knee_r", "hip_l", "hip_r"):
         shares = [dec[name][g] for g in ("lens", "camera", "limbs", "keypoints")]
         assert sum(shares) == pytest.approx(1.0, abs=1e-9) and min(shares) >= 0
-        # exact keypoints: next to nothing of the band is detector noise (the noise model still
-        # reads a trace from the rendered motion; a noisy clip's share is > 0.15, below)
-        assert dec[name]["keypoints"] < 0.1
     assert run["lens"]["informative"] and "band_decomposition_method" in run
 
 
-def test_lens_none_is_recorded_and_noise_shows_in_the_decomposition(noisy_wide_lens_clip, tmp_path):
+def test_lens_none_is_recorded_and_the_keypoint_share_follows_the_detector_noise(
+        wide_lens_clip, noisy_wide_lens_clip, tmp_path):
     import json
 
     from probreg.inference import SamplerSettings
     from probreg.pipeline import RunOptions, run_clip
 
-    fast = SamplerSettings(n_walkers=20, burn_in=100, chunk=150, max_steps=400, n_draws=8, seed=1)
-    run_clip(noisy_wide_lens_clip, tmp_path / "none", RunOptions(sampler=fast, report=False, lens="none"),
-             log=lambda *a: None)
-    k = json.loads((tmp_path / "none" / "camera.json").read_text())["k1"]
-    assert k == {"median": 0.0, "lo": 0.0, "hi": 0.0, "source": "assumed"}
-    dec = json.loads((tmp_path / "none" / "run.json").read_text())["band_decomposition"]
-    assert dec["knee_l"]["lens"] == 0.0
-    assert dec["knee_l"]["keypoints"] > 0.15 and dec["knee_r"]["keypoints"] > 0.15
+    fast = SamplerSettings(n_walkers=20, burn_in=100, chunk=150, max_steps=400, n_draws=20, seed=1)
+    kp_share = {}
+    for name, clip in (("exact", wide_lens_clip), ("noisy", noisy_wide_lens_clip)):
+        run_clip(clip, tmp_path / name, RunOptions(sampler=fast, report=False, lens="none"), log=lambda *a: None)
+        k = json.loads((tmp_path / name / "camera.json").read_text())["k1"]
+        assert k == {"median": 0.0, "lo": 0.0, "hi": 0.0, "source": "assumed"}
+        dec = json.loads((tmp_path / name / "run.json").read_text())["band_decomposition"]
+        assert dec["knee_l"]["lens"] == 0.0
+        kp_share[name] = np.mean([dec[a]["keypoints"] for a in ("knee_l", "knee_r", "hip_l", "hip_r")])
+    # exact keypoints: little of the band is detector noise (the noise model still reads ~0.5 px
+    # from the rendered motion itself); with the generator's detector noise (~5 px) much more
+    assert kp_share["exact"] < 0.15 and kp_share["noisy"] > 2 * kp_share["exact"]
     with pytest.raises(ValueError, match="lens must be"):
         run_clip(noisy_wide_lens_clip, tmp_path / "bad", RunOptions(sampler=fast, report=False, lens="guess"),
                  log=lambda *a: None)
