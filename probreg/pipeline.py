@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from .analysis import GAIT_FIELDS
-from .calibration.lens import LensPrior, infer_lens, undistort_registration
+from .calibration.lens import LensPrior, lens_registration
 from .calibration.registration import camera_json, register_clip
 from .calibration.side import requested_side
 from .geometry import JOINT_NAMES
@@ -274,9 +274,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     lens = None
     model_reg = reg
     if options.dist is None and options.lens == "infer":
-        lens = infer_lens(reg, options.lens_prior, height_m=options.priors.camera_height.centre())
+        lens, model_reg = lens_registration(reg, options.lens_prior, height_m=options.priors.camera_height.centre())
         if lens is not None:
-            model_reg = undistort_registration(reg, lens)
             log(f"lens: k1 from the lane lines (corner shift {lens.kappa_star * lens.evidence.r_ref:+.2f} px "
                 f"at the best fit; {lens.evidence.n_frames} frames, {lens.evidence.n_lines} lines)")
     elif options.lens not in ("infer", "none"):

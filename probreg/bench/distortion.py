@@ -70,13 +70,16 @@ def _mode_args(mode, dist):
         return ["--dist=" + ",".join(repr(float(v)) for v in dist)]
     if mode == "ignored":
         return ["--lens", "none"]
+    if mode == "ignored_seed1":  # the sampler's own noise: the same run with another seed
+        return ["--lens", "none", "--seed", "1"]
     return []
 
 
 def _cli(clip, out, extra):
     """``probreg run`` in a fresh single-core process; (exit code, wall s)."""
     env = dict(os.environ, PROBREG_WORKERS="1", OMP_NUM_THREADS="1", OPENBLAS_NUM_THREADS="1", MKL_NUM_THREADS="1")
-    cmd = [sys.executable, "-m", "probreg", "run", str(clip), "--out", str(out), "--seed", "0", "--quiet", *extra]
+    seed = [] if "--seed" in extra else ["--seed", "0"]
+    cmd = [sys.executable, "-m", "probreg", "run", str(clip), "--out", str(out), *seed, "--quiet", *extra]
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
     return proc.returncode, time.perf_counter() - t0, proc.stderr.strip().splitlines()[-1:] if proc.stderr else []
@@ -166,6 +169,8 @@ def run(args=None):
         for set_, name, clip in clips:
             dist = np.asarray(load_groundtruth(clip).cameras[0].dist, float)
             modes = MODES if set_ != "narrow" or np.any(dist) else ("inferred", "ignored")
+            if set_ == "narrow":
+                modes = (*modes, "ignored_seed1")
             for mode in modes:
                 tasks.append((set_, name, clip, mode, Path(tmp) / "out" / f"{name}_{mode}", _mode_args(mode, dist)))
         t0 = time.perf_counter()
@@ -205,7 +210,7 @@ def _tables(rep, clips, res):
             gt = load_groundtruth(clip)
             k1 = float(gt.cameras[0].dist[0])
             fov = float(np.median([c.fov_deg for c in gt.cameras]))
-            for mode in MODES:
+            for mode in (*MODES, "ignored_seed1"):
                 r = res.get((name, mode))
                 if r is None:
                     continue
@@ -252,9 +257,16 @@ def _targets(rep, clips, res, numbers):
             rel_ok.append(bool(inf["mpjpe_cm"] <= 1.1 * giv["mpjpe_cm"]
                                and inf["height_pct"] <= max(1.1 * giv["height_pct"], giv["height_pct"] + 0.5)))
         n += 1
-    narrow = [(n_, res.get((n_, "inferred"), {}), res.get((n_, "ignored"), {})) for s, n_, _ in clips if s == "narrow"]
-    d_knee = [a["knee_deg"] - b["knee_deg"] for _, a, b in narrow if "knee_deg" in a and "knee_deg" in b]
-    d_mpjpe = [a["mpjpe_cm"] - b["mpjpe_cm"] for _, a, b in narrow if "mpjpe_cm" in a and "mpjpe_cm" in b]
+    narrow = [(res.get((n_, "inferred"), {}), res.get((n_, "ignored"), {}), res.get((n_, "ignored_seed1"), {}))
+              for s, n_, _ in clips if s == "narrow"]
+    narrow = [(a, b, c) for a, b, c in narrow if all("knee_deg" in x for x in (a, b, c))]
+    d_knee = [a["knee_deg"] - b["knee_deg"] for a, b, _ in narrow]
+    d_mpjpe = [a["mpjpe_cm"] - b["mpjpe_cm"] for a, b, _ in narrow]
+    seed_knee = [c["knee_deg"] - b["knee_deg"] for _, b, c in narrow]
+    seed_mpjpe = [c["mpjpe_cm"] - b["mpjpe_cm"] for _, b, c in narrow]
+    # within noise: no larger than what another sampler seed does to the same run (+ 0.1 deg / 0.2 cm)
+    noise_ok = [abs(dk) <= abs(sk) + 0.1 and abs(dm) <= abs(sm) + 0.2
+                for dk, dm, sk, sm in zip(d_knee, d_mpjpe, seed_knee, seed_mpjpe)]
     walls = [(res[(n_, "inferred")]["wall_s"], res[(n_, "ignored")]["wall_s"]) for _, n_, _ in clips
              if (n_, "inferred") in res and (n_, "ignored") in res]
     ratio = float(np.median([a / b for a, b in walls])) if walls else float("nan")
@@ -266,19 +278,23 @@ def _targets(rep, clips, res, numbers):
          f"{sum(rel_ok)}/{len(rel_ok)}", "yes" if rel_ok and all(rel_ok) else "no"],
         ["lens inferred: MPJPE <= 8 cm and height <= 5 %", "every such clip", f"{sum(abs_ok)}/{len(abs_ok)}",
          "yes" if abs_ok and all(abs_ok) else "no"],
-        ["narrow clips: inferred minus ignored, knee deg / MPJPE cm", "within noise",
-         ("max |dknee| %.2f, max |dMPJPE| %.2f" % (np.max(np.abs(d_knee)), np.max(np.abs(d_mpjpe))))
-         if d_knee else "n/a", "yes" if d_knee and max(np.abs(d_knee)) <= 0.3 and max(np.abs(d_mpjpe)) <= 0.5 else "no"],
+        ["narrow clips: inferred minus ignored (another seed minus ignored), knee deg / MPJPE cm", "within noise",
+         "; ".join(f"{dk:+.2f} ({sk:+.2f}) / {dm:+.2f} ({sm:+.2f})"
+                   for dk, dm, sk, sm in zip(d_knee, d_mpjpe, seed_knee, seed_mpjpe)) or "n/a",
+         f"{sum(noise_ok)}/{len(noise_ok)} clips" if noise_ok else "n/a"],
         ["run time inferred / ignored (median over clips)", "<= 1.5", f"{ratio:.2f}", "yes" if ratio <= 1.5 else "no"],
     ]
     rep.add("## Targets (issue 27)\n")
     rep.add(md_table(["target", "wanted", "measured", "met"], rows))
-    rep.add("Within noise for the narrow clips is taken as 0.3 deg knee and 0.5 cm MPJPE (the spread of "
-            "reruns with other seeds on the suite); 'within 10 %' as MPJPE at most 1.1x and height error at most "
-            "1.1x (or 0.5 percentage points) that of the run given the true lens.\n")
+    rep.add("Within noise for a narrow clip: the change the inferred lens makes is no larger than what another "
+            "sampler seed does to the lens-ignored run (+ 0.1 deg knee, 0.2 cm MPJPE); 'within 10 %' as MPJPE at "
+            "most 1.1x and height error at most 1.1x (or 0.5 percentage points) that of the run given the true "
+            "lens. With 9 such clips, a 90 % interval holds the truth on all 9 with probability 0.39: the "
+            "coverage target cannot be told from 9 clips within 85-95 %.\n")
     numbers["targets"] = {"k1_hits": int(sum(hits)), "k1_n": len(hits), "rel_ok": int(sum(rel_ok)),
                           "rel_n": len(rel_ok), "abs_ok": int(sum(abs_ok)), "abs_n": len(abs_ok),
-                          "narrow_dknee": d_knee, "narrow_dmpjpe": d_mpjpe, "time_ratio": ratio}
+                          "narrow_dknee": d_knee, "narrow_dmpjpe": d_mpjpe, "narrow_seed_dknee": seed_knee,
+                          "narrow_seed_dmpjpe": seed_mpjpe, "time_ratio": ratio}
 
 
 def _decomposition(rep, clips, res):

@@ -282,34 +282,56 @@ class ClipModel(DrawPropagation):
         idx = np.flatnonzero(ok)
         return idx[a], idx[b], t
 
+    def _sorted_heights(self):
+        """Per frame, its branch's grid heights in increasing order (``+inf`` padded) and their
+        grid indices: (F, n) each, computed once (the branch grids do not change)."""
+        if getattr(self, "_hs_cache", None) is None or self._hs_cache[0] is not self.h:
+            hh = np.where(np.isfinite(self.h), self.h, np.inf)
+            order = np.argsort(hh, axis=1, kind="stable")
+            self._hs_cache = (self.h, np.take_along_axis(hh, order, axis=1), order,
+                              np.isfinite(self.h).sum(axis=1))
+        return self._hs_cache[1:]
+
+    def _brackets(self, height_m):
+        """:meth:`_member_at` for every frame at once: grid indices ``ia``, ``ib`` (F,), the
+        weight ``t`` and whether the frame reaches ``height_m`` (at least two grid members
+        and ``height_m`` within their heights)."""
+        hs, order, n_ok = self._sorted_heights()
+        F = len(hs)
+        j = np.clip((hs < height_m).sum(axis=1), 1, np.maximum(n_ok - 1, 1))
+        rows = np.arange(F)
+        ha, hb = hs[rows, j - 1], hs[rows, j]
+        last = hs[rows, np.maximum(n_ok - 1, 0)]
+        ok = (n_ok >= 2) & (hs[:, 0] <= height_m) & (height_m <= last)
+        with np.errstate(invalid="ignore", divide="ignore"):
+            t = np.where(hb != ha, (height_m - ha) / (hb - ha), 0.0)
+        return order[rows, j - 1], order[rows, j], np.where(ok, t, 0.0), ok
+
     def _focal_at(self, height_m):
         """(F,) focal length of every frame's own member at ``height_m`` (NaN: none)."""
-        out = np.full(self.F, np.nan)
-        for i in np.flatnonzero(self.valid_lanes):
-            at = self._member_at(i, height_m)
-            if at is not None:
-                ia, ib, t = at
-                out[i] = np.exp(self.logf[i, ia] + t * (self.logf[i, ib] - self.logf[i, ia]))
-        return out
+        ia, ib, t, ok = self._brackets(height_m)
+        ok &= self.valid_lanes
+        rows = np.arange(self.F)
+        with np.errstate(invalid="ignore"):
+            lf = self.logf[rows, ia] + t * (self.logf[rows, ib] - self.logf[rows, ia])
+        return np.where(ok, np.exp(lf), np.nan)
 
     def cameras_at(self, height_m, offsets=None):
         """Per-frame cameras of the family member at ``height_m`` as CameraArrays."""
         F = self.F
-        valid = self.valid.copy()
+        ia, ib, t, reach = self._brackets(height_m)
+        valid = self.valid & reach
         f = np.full(F, np.nan)
         y = np.full(F, np.nan)
         R = np.full((F, 3, 3), np.nan)
-        for i in np.flatnonzero(self.valid):
-            at = self._member_at(i, height_m)
-            if at is None:
-                valid[i] = False
-                continue
-            ia, ib, t = at
-            f[i] = np.exp(self.logf[i, ia] + t * (self.logf[i, ib] - self.logf[i, ia]))
-            y[i] = self.y[i, ia] + t * (self.y[i, ib] - self.y[i, ia])
-            Rm = self.R[i, ia] + t * (self.R[i, ib] - self.R[i, ia])
+        v = np.flatnonzero(valid)
+        if len(v):
+            a, b, tv = ia[v], ib[v], t[v]
+            f[v] = np.exp(self.logf[v, a] + tv * (self.logf[v, b] - self.logf[v, a]))
+            y[v] = self.y[v, a] + tv * (self.y[v, b] - self.y[v, a])
+            Rm = self.R[v, a] + tv[:, None, None] * (self.R[v, b] - self.R[v, a])
             u, _, vt = np.linalg.svd(Rm)
-            R[i] = u @ vt  # nearest rotation
+            R[v] = u @ vt  # nearest rotations
         off = self.offsets if offsets is None else offsets
         y = y - self.reg.lane_width_m * off
         # frames without lanes between frames with lanes: the camera moves smoothly, so

@@ -75,6 +75,23 @@ def test_log_prob_is_vectorised_and_rejects_impossible_values(model):
     assert np.isclose(lp[0], lp[3])
 
 
+def test_members_of_all_frames_at_once_match_the_per_frame_search(model):
+    """The vectorised bracket search (cameras_at, _focal_at) gives every frame the grid members and
+    weight the per-frame search gives."""
+    model, _ = model
+    lo, hi = model.height_range
+    for h in np.geomspace(max(lo, 0.5) * 0.9, hi * 1.1, 9):
+        ia, ib, t, ok = model._brackets(h)
+        for i in range(model.F):
+            at = model._member_at(i, h)
+            assert ok[i] == (at is not None)
+            if at is not None:
+                a, b, w = at
+                fa = model.logf[i, a] + w * (model.logf[i, b] - model.logf[i, a])
+                fb = model.logf[i, ia[i]] + t[i] * (model.logf[i, ib[i]] - model.logf[i, ia[i]])
+                assert fa == pytest.approx(fb, abs=1e-12)
+
+
 def test_noise_model_known_answer(rng):
     n = 4000
     e = np.zeros((n, 17, 2))
