@@ -32,6 +32,7 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
+from scipy.ndimage import median_filter
 
 from ..lanes.types import FrameLanes, _scale_frame
 
@@ -364,9 +365,10 @@ class LensModel:
 
 
 def _zoom_ratios(reg, height_m):
-    """Each frame's focal length relative to the clip's median, from the families of the
-    (distorted) lines at ``height_m`` (ratios between frames hardly depend on the lens or the
-    height); 1 where a frame has no member, and the median focal length."""
+    """Each frame's focal length relative to the clip's median, from the families of the lines
+    at ``height_m`` (ratios between frames hardly depend on the height), smoothed over time
+    with a 25-frame running median; frames without a member get their neighbours' ratio.
+    Also returns the reference (median) focal length."""
     F = len(reg.frame_lanes)
     f = np.full(F, np.nan)
     for i, m in enumerate(reg.sequence.members_at_height(height_m)):
@@ -374,8 +376,15 @@ def _zoom_ratios(reg, height_m):
             f[i] = m.focal_px
     if not np.isfinite(f).any():
         return np.ones(F), float("nan")
-    ref = float(np.nanmedian(f))
-    return np.where(np.isfinite(f), f / ref, 1.0), ref
+    # a broadcast zoom changes smoothly; single frames' families scatter by several per cent
+    # (near the family's highest member the focal length at a given height is ill-conditioned):
+    # a running median over half a second of frames keeps the zoom and drops that scatter
+    ok = np.isfinite(f)
+    t = np.arange(F)
+    g = np.interp(t, t[ok], np.log(f[ok]))
+    g = median_filter(g, size=min(25, 2 * (F // 2) - 1) if F > 2 else 1, mode="nearest")
+    ref = float(np.exp(np.median(g[ok])))
+    return np.exp(g) / ref, ref
 
 
 def infer_lens(reg, prior: LensPrior = LensPrior(), height_m=10.0):
