@@ -216,8 +216,9 @@ def _robust_fit(points, iters=3, min_scale_px=0.1, degree=3):
 
     A clean line's centres scatter by ~0.05 px; where the athlete's legs or shadow
     cross it they move by 0.2-1 px, which a coarser floor would keep.  The outliers are
-    judged against a polynomial of ``degree`` in the position along the line (not against
-    the straight line itself): a lane line bent by the lens deviates from its chord by
+    judged against a polynomial of ``degree`` in the position along the line when the line is
+    bent (the polynomial's residuals scatter less than half as much as the straight line's),
+    else against the straight line: a lane line bent by the lens deviates from its chord by
     several px at the ends of a wide view, and judged against a straight line those ends
     were dropped, which straightened the support and hid the lens from the plumb-line
     evidence (k1 came out ~5 % low on a 35 deg, k1 = +0.2 view).  Returns the straight
@@ -229,6 +230,13 @@ def _robust_fit(points, iters=3, min_scale_px=0.1, degree=3):
     t = points @ np.array([-n[1], n[0]])
     t = (t - t.mean()) / max(np.ptp(t) / 2, 1e-9)
     V = np.vander(t, degree + 1) if len(points) > 2 * (degree + 1) else None
+    if V is not None:
+        # the curve only where the line is bent: its residuals must scatter less than half as
+        # much as the straight line's (a straight line is judged against itself, as before)
+        r = points @ line[:2] + line[2]
+        rc = r - V @ np.linalg.lstsq(V, r, rcond=None)[0]
+        if not 1.4826 * _median(np.abs(rc)) < 0.5 * max(1.4826 * _median(np.abs(r)), min_scale_px):
+            V = None
     for _ in range(iters):
         r = points @ line[:2] + line[2]
         if V is not None:
