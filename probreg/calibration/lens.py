@@ -93,7 +93,7 @@ def undistort_px(points_px, centre, q, iterations=8):
 
     >>> c = np.array([959.5, 539.5])
     >>> p = np.array([[100.0, 50.0], [1800.0, 1000.0]])
-    >>> bool(np.allclose(distort_px(undistort_px(p, c, -2e-7), c, -2e-7), p))
+    >>> bool(np.allclose(distort_px(undistort_px(p, c, -6e-8), c, -6e-8), p))
     True
     """
     d = np.asarray(points_px, float) - centre

@@ -264,24 +264,6 @@ class ClipModel(DrawPropagation):
                                    self.reg.lane_width_m, height_window=(lo / 1.5, hi * 1.5),
                                    branch=self.branch)
 
-    def _member_at(self, i, height_m):
-        """Grid members of frame ``i``'s branch that bracket ``height_m``: ``(ia, ib, t)`` to
-        interpolate linearly (``t`` from ``ia`` to ``ib``), or None when out of its reach."""
-        hh = self.h[i]
-        ok = np.isfinite(hh)
-        if ok.sum() < 2:
-            return None
-        hv = hh[ok]
-        order = np.argsort(hv)
-        hs = hv[order]
-        if not hs[0] <= height_m <= hs[-1]:
-            return None
-        j = int(np.clip(np.searchsorted(hs, height_m), 1, len(hs) - 1))
-        a, b = order[j - 1], order[j]
-        t = (height_m - hv[a]) / (hv[b] - hv[a]) if hv[b] != hv[a] else 0.0
-        idx = np.flatnonzero(ok)
-        return idx[a], idx[b], t
-
     def _sorted_heights(self):
         """Per frame, its branch's grid heights in increasing order (``+inf`` padded) and their
         grid indices: (F, n) each, computed once (the branch grids do not change)."""
@@ -293,9 +275,10 @@ class ClipModel(DrawPropagation):
         return self._hs_cache[1:]
 
     def _brackets(self, height_m):
-        """:meth:`_member_at` for every frame at once: grid indices ``ia``, ``ib`` (F,), the
-        weight ``t`` and whether the frame reaches ``height_m`` (at least two grid members
-        and ``height_m`` within their heights)."""
+        """Grid members of every frame's branch that bracket ``height_m``, to interpolate
+        linearly: grid indices ``ia``, ``ib`` (F,), the weight ``t`` from ``ia`` to ``ib`` and
+        whether the frame reaches ``height_m`` (at least two grid members and ``height_m``
+        within their heights)."""
         hs, order, n_ok = self._sorted_heights()
         F = len(hs)
         j = np.clip((hs < height_m).sum(axis=1), 1, np.maximum(n_ok - 1, 1))
