@@ -300,12 +300,9 @@ def distortion_study(clip_dir, out_dir, k1_values, options: RunOptions = RunOpti
     return replace(study, out_dir=out_dir)
 
 
-def _inferred_run(out_dir, clip_dir, options, ref_res, log):
-    """The clip run with the lens inferred from its lanes (``OUT/lens_inferred``): its ``k1``
-    interval, every angle's band and change against the reference, the band decomposition."""
-    sub = out_dir / "lens_inferred"
-    log(f"k1 inferred from the lanes: {sub}")
-    res = run_clip(clip_dir, sub, replace(options, dist=None, lens="infer", overwrite=False), log=log)
+def _angle_changes(res, ref_res):
+    """Per angle of ``res``: its mean, the mean and largest per-frame change of its posterior
+    median against ``ref_res``, and the mean width of its 90 % band."""
     angles = {}
     for name in ANGLES:
         if name not in res.angle_summary or name not in ref_res.angle_summary:
@@ -317,6 +314,16 @@ def _inferred_run(out_dir, clip_dir, options, ref_res, log):
                         "mean_abs_change_deg": float(np.mean(diff[ok])) if ok.any() else float("nan"),
                         "max_abs_change_deg": float(np.max(diff[ok])) if ok.any() else float("nan"),
                         "mean_band_deg": float(np.nanmean(hi - lo))}
+    return angles
+
+
+def _inferred_run(out_dir, clip_dir, options, ref_res, log):
+    """The clip run with the lens inferred from its lanes (``OUT/lens_inferred``): its ``k1``
+    interval, every angle's band and change against the reference, the band decomposition."""
+    sub = out_dir / "lens_inferred"
+    log(f"k1 inferred from the lanes: {sub}")
+    res = run_clip(clip_dir, sub, replace(options, dist=None, lens="infer", overwrite=False), log=log)
+    angles = _angle_changes(res, ref_res)
     return {"k1": {k: res.lens.get(k) for k in ("median", "lo", "hi", "source")}, "height_m": dict(res.height),
             "angles": angles, "band_decomposition": res.band_decomposition, "result_dir": sub.name}
 
@@ -366,18 +373,7 @@ def _study_into(out_dir, clip_dir, ks, base, reference_k1, options, log, infer=T
     for k1, (res, d, straight, cams) in runs.items():
         f_med = float(np.nanmedian(cams.focal_px[cams.valid])) if cams.valid.any() else float("nan")
         w = res.model.reg.image_size[0]
-        angles = {}
-        for name in ANGLES:
-            if name not in res.angle_summary or name not in ref_res.angle_summary:
-                continue
-            med, lo, hi = res.angle_summary[name]
-            rmed = ref_res.angle_summary[name][0]
-            diff = np.abs(med - rmed)
-            ok = np.isfinite(diff)
-            angles[name] = {"mean_deg": float(np.nanmean(med)),
-                            "mean_abs_change_deg": float(np.mean(diff[ok])) if ok.any() else float("nan"),
-                            "max_abs_change_deg": float(np.max(diff[ok])) if ok.any() else float("nan"),
-                            "mean_band_deg": float(np.nanmean(hi - lo))}
+        angles = _angle_changes(res, ref_res)
         gait = {k: dict(v) for k, v in res.gait.items() if k in GAIT}
         for k, v in gait.items():
             v["change"] = float(v["median"] - ref_res.gait[k]["median"]) if k in ref_res.gait else float("nan")
