@@ -37,7 +37,7 @@ def _defaults():
     p, smp, run = ModelPriors(), SamplerSettings(), RunOptions()
     return {"height_m": p.camera_height.median, "height_log_sd": p.camera_height.log_sd, "stature": p.stature.mean,
             "stature_sd": p.stature.sd, "walkers": smp.n_walkers, "max_steps": smp.max_steps, "draws": smp.n_draws,
-            "seed": smp.seed, "camera_side": run.camera_side, "min_score": run.min_score, "lens": run.lens,
+            "seed": smp.seed, "moves": smp.moves, "camera_side": run.camera_side, "min_score": run.min_score, "lens": run.lens,
             "lens_k1_sd": run.lens_prior.sd}
 
 
@@ -56,6 +56,8 @@ CONFIG_KEYS = (
     Key("sampler", "max_steps", "max_steps", int, _D["max_steps"], "sampling budget (steps after burn-in)"),
     Key("sampler", "draws", "draws", int, _D["draws"], "posterior draws propagated to angles (the bands)"),
     Key("sampler", "seed", "seed", int, _D["seed"], "random seed (results are reproducible for a seed)"),
+    Key("sampler", "moves", "moves", str, _D["moves"],
+        "emcee moves: 'de' (differential evolution, mixes faster on the correlated posterior) or 'stretch'"),
     Key("lens", "mode", "lens", str, _D["lens"],
         "without a known lens (dist): 'infer' k1 from the lane lines, or 'none' (no distortion)"),
     Key("lens", "k1_prior_sd", "lens_k1_sd", float, _D["lens_k1_sd"], "sd of the k1 prior (normal, mean 0)"),

@@ -35,7 +35,8 @@ from .calibration.registration import camera_json, register_clip
 from .calibration.side import requested_side
 from .geometry import JOINT_NAMES
 from .inference import ModelPriors, angle_bands, gait_cycle_bands, gait_intervals
-from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationError, SamplerSettings
+from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationError
+from .inference.sampling import SamplerSettings
 from .inference.verdict import bone_length_cv, clip_verdict
 from .io.clip import ClipFormatError, load_clip, write_json
 from .io.frames import has_frames

@@ -14,6 +14,7 @@ import warnings
 import numpy as np
 from scipy.ndimage import median_filter
 
+from .banded import SeriesSystem, lower_band
 from .basic import _lowpass_series, butterworth, fill_gaps, hampel, noise_model
 
 __all__ = ["periodic_smooth", "periodic_smooth_series", "score_noise_scale", "stride_lags", "stride_period_frames"]
@@ -335,22 +336,18 @@ def periodic_smooth_series(y, lag, fps, rho=0.0, smooth_cutoff_hz=14.0, lag_sd_f
     >>> bool(abs(info["noise_sd"] - 5) < 1)
     True
     """
-    from scipy import sparse
-
     y = np.asarray(y, float)
     F = len(y)
     ok = np.isfinite(y)
     if ok.sum() < 10 or lag is None:
         return y.copy(), {"noise_sd": float("nan"), "stride_sd": float("nan")}
     t = np.arange(F)
-    R, has = _coupling(np.asarray(lag, float))
-    P2 = _smoothness(F, fps, smooth_cutoff_hz)
-    mask = sparse.diags(ok.astype(float))
-    Qm = (mask @ _ar1_precision(F, float(np.clip(rho, 0.0, 0.9))) @ mask).tocsc()
-    Qd = Qm.toarray()
+    wc = 2 * np.pi * smooth_cutoff_hz / fps
+    system = SeriesSystem(ok, lag, rho, p2_scale=1.0 / (2 - 2 * np.cos(min(wc, np.pi))) ** 2)
+    has = system.has
     yi = np.interp(t, t[ok], y[ok])
     y0 = np.where(ok, y, 0.0)
-    rep = R @ yi
+    rep = system.tie(yi)
     sel = ok[has]
     x = yi
     n_ok = int(ok.sum())
@@ -364,15 +361,12 @@ def periodic_smooth_series(y, lag, fps, rho=0.0, smooth_cutoff_hz=14.0, lag_sd_f
             sv2 = max((float(np.mean(rep[sel] ** 2 - timing[sel])) - 2 * sn2) / 2, min_sv**2)
         cvar = 2 * sv2 + timing
         # scaled by sn2: (Qm + sn2 * prior) x = Qm y, whose hat matrix is (...)^-1 Qm
-        A = Qm + sn2 * (R.T @ sparse.diags(1.0 / cvar) @ R) + P2
         try:
-            lu = _SPDSolver(A)
-        except RuntimeError:  # singular: leave the series as it is
+            x, edf = system.solve(y0, sn2, cvar)
+        except np.linalg.LinAlgError:  # singular: leave the series as it is
             return y.copy(), {"noise_sd": float("nan"), "stride_sd": float("nan")}
-        x = lu.solve(Qm @ y0)
         r = np.where(ok, y - x, 0.0)
-        edf = float(np.trace(lu.solve(Qd)))
-        sn2 = max(float(r @ (Qm @ r)) / max(n_ok - edf, 1.0), 1e-6)
+        sn2 = max(float(r @ system.qm(r)) / max(n_ok - edf, 1.0), 1e-6)
     return x, {"noise_sd": float(np.sqrt(sn2)), "stride_sd": float(np.sqrt(sv2))}
 
 
@@ -383,25 +377,35 @@ def _robust_fit(y, okj, prior, Q, sn2, rs2, robust_iters, outlier_k, w=None):
     AR(1) noise precision, ``sn2`` (F,) noise variance, ``rs2`` (F,) or None its relative
     per-detection factor, ``w`` starting outlier weights.  Returns the fit (F, 2) and the
     last weights."""
-    from scipy import sparse
+    from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 
     y0 = np.where(okj[:, None], y, 0.0)
     w = okj.astype(float) if w is None else w
     var = sn2 if rs2 is None else sn2 * rs2
-    dense = len(y) <= DENSE_MAX  # small systems: dense arrays throughout (no sparse overhead)
-    if dense:
-        Qd, Pd = Q.toarray(), prior.toarray()
-        rows, cols = np.nonzero(Pd)
-        band = max(int(np.max(np.abs(rows - cols))) if len(rows) else 0, 1)  # Q is tridiagonal
+    # banded throughout: the prior (one stride wide) in band storage, the data term
+    # tridiagonal (AR(1) noise precision); the same system as the sparse one, without its
+    # per-call overhead
+    pb = lower_band(prior, min_band=1)
+    qd, qo = Q.diagonal(), Q.diagonal(-1)
     for it in range(robust_iters + 1):
         # data term with the AR(1) noise precision (tridiagonal), missing frames left out
         sq = np.sqrt(w / var)
-        if dense:
-            W = sq[:, None] * Qd * sq[None, :]
-            x = _SPDSolver(W + Pd, band=band).solve(W @ y0)
-        else:
+        ab = pb.copy()
+        ab[0] += sq * sq * qd
+        ab[1, :-1] += sq[1:] * sq[:-1] * qo
+        sy = sq[:, None] * y0
+        rhs = qd[:, None] * sy
+        rhs[:-1] += qo[:, None] * sy[1:]
+        rhs[1:] += qo[:, None] * sy[:-1]
+        rhs *= sq[:, None]
+        try:
+            x = cho_solve_banded((cholesky_banded(ab, lower=True, check_finite=False), True), rhs,
+                                 check_finite=False)  # both coordinates at once
+        except LinAlgError:  # not numerically positive definite: the general solver
+            from scipy import sparse
+
             W = sparse.diags(sq) @ Q @ sparse.diags(sq)
-            x = _SPDSolver(W + prior).solve(W @ y0)  # both coordinates at once
+            x = _SPDSolver(W + prior).solve(W @ y0)
         if it == robust_iters:
             break
         # detector outliers and left/right swaps: redescending (Cauchy-type) weights on the

@@ -21,8 +21,8 @@ from .model import (
     PARAM_NAMES,
     STILLNESS_SYS_SD,
     ClipModel,
-    SamplerSettings,
 )
+from .sampling import MOVES, SamplerSettings
 from .priors import SEGMENT_PROPORTIONS, LogNormalPrior, ModelPriors, NormalPrior, Prior
 from .verdict import VerdictThresholds, bone_length_cv, clip_verdict, posterior_modes
 
@@ -30,6 +30,6 @@ __all__ = [
     "VerdictThresholds", "clip_verdict", "bone_length_cv", "posterior_modes",
     "Prior", "NormalPrior", "LogNormalPrior", "ModelPriors", "SEGMENT_PROPORTIONS", "angle_bands",
     "STANCE_WINDOW", "stance_window", "BAND_SCALE", "angle_curvature", "gait_intervals",
-    "GAIT_BAND_SCALE", "NONNEGATIVE_GAIT_SUFFIXES", "ClipModel", "SamplerSettings", "PARAM_NAMES",
+    "GAIT_BAND_SCALE", "NONNEGATIVE_GAIT_SUFFIXES", "ClipModel", "SamplerSettings", "MOVES", "PARAM_NAMES",
     "STILLNESS_SYS_SD", "BAND_CURVATURE_S2", "GAIT_CYCLE_ANGLES", "gait_cycle_bands",
 ]

@@ -36,8 +36,8 @@ Likelihood (every term a function of the height; the limb terms also of the leng
 
 The height-dependent statistics are precomputed on a grid of heights and
 interpolated, so the log-probability is vectorised over walkers and costs
-microseconds; ``emcee`` runs until the chain is 50 integrated
-autocorrelation times long (or a budget is spent).  Every kept draw is then
+microseconds; ``emcee`` (differential-evolution moves, :mod:`probreg.inference.sampling`) runs
+until the chain is 50 integrated autocorrelation times long (or a budget is spent).  Every kept draw is then
 *propagated*: cameras at its height, ground track, lifting with its limb
 lengths and with detector noise re-simulated (parametric bootstrap of the
 keypoints), giving joint and angle samples and so credible bands.
@@ -46,7 +46,6 @@ keypoints), giving joint and angle samples and so credible bands.
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass
 
 import numpy as np
 
@@ -65,6 +64,7 @@ from ..lifting.trajectory import _runs, fit_ground_track
 from .bands import stance_window
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
 from .propagation import DrawPropagation, _default_workers, _fork_map
+from .sampling import EmceeSampling, SamplerSettings
 
 __all__ = ["ClipModel", "SamplerSettings", "PARAM_NAMES", "STILLNESS_SYS_SD", "NoCalibrationError"]
 
@@ -92,21 +92,7 @@ OBSERVED_SEGMENTS = ("thigh", "shank", "upper_arm", "forearm", "trunk")
 
 PARAM_NAMES = ["log_height", "stature"] + [f"m_{s}" for s in SEGMENTS]
 
-@dataclass(frozen=True)
-class SamplerSettings:
-    """Sampling budget and propagation size."""
-
-    n_walkers: int = 24
-    tau_multiple: float = 50.0
-    max_steps: int = 8000
-    chunk: int = 250
-    burn_in: int = 200
-    n_draws: int = 60
-    bootstrap_noise: bool = True
-    seed: int = 0
-
-
-class ClipModel(DrawPropagation):
+class ClipModel(DrawPropagation, EmceeSampling):
     """Posterior of one clip: built from a registration and the (raw) keypoints.
 
     Parameters
@@ -608,43 +594,4 @@ class ClipModel(DrawPropagation):
                 break
             p0[bad] = base + rng.normal(0, 1, (bad.sum(), len(base))) * scale * 0.5
         return p0
-
-    def sample(self, settings: SamplerSettings = SamplerSettings(), progress=None):
-        """Run emcee; returns ``(sampler, tau)``.
-
-        ``progress(desc, total)``, when given, makes a progress bar (``update(n)``, ``close()``)
-        that counts the steps (burn-in and the budget; it jumps to the end on convergence)."""
-        import emcee
-
-        rng = np.random.default_rng(settings.seed)
-        D = len(self.param_names)
-        if settings.n_walkers < 2 * D:
-            raise ValueError(f"emcee's stretch move needs at least {2 * D} walkers for {D} parameters, "
-                             f"got {settings.n_walkers}")
-        p0 = self.initial_walkers(settings.n_walkers, rng)
-        sampler = emcee.EnsembleSampler(settings.n_walkers, D, self.log_prob, vectorize=True)
-        sampler.random_state = np.random.RandomState(settings.seed).get_state()  # reproducible moves
-        t0 = time.perf_counter()
-        total = settings.burn_in + settings.max_steps
-        bar = progress("sampling", total) if progress is not None else None
-        state = sampler.run_mcmc(p0, settings.burn_in, progress=False, skip_initial_state_check=True)
-        if bar is not None:
-            bar.update(settings.burn_in)
-        sampler.reset()
-        tau = np.full(D, np.inf)
-        steps = 0
-        while steps < settings.max_steps:
-            state = sampler.run_mcmc(state, settings.chunk, progress=False, skip_initial_state_check=True)
-            steps += settings.chunk
-            if bar is not None:
-                bar.update(settings.chunk)
-            tau = sampler.get_autocorr_time(tol=0)
-            if np.all(np.isfinite(tau)) and steps >= settings.tau_multiple * np.max(tau):
-                break
-        if bar is not None:
-            bar.update(max(0, total - settings.burn_in - steps))  # converged: the rest of the budget is not needed
-            bar.close()
-        self.timings["sampling_s"] = time.perf_counter() - t0
-        self.sampler = sampler
-        return sampler, tau
 

@@ -1,0 +1,100 @@
+"""Sampling the clip posterior with emcee: the budget, the moves and the stopping rule.
+
+The posterior of a clip (camera height, stature, segment multipliers, the lens) is strongly
+correlated: a taller camera goes with a taller athlete.  emcee's default stretch move mixes
+slowly there (integrated autocorrelation times of about 100 steps on a typical clip); a mixture
+of differential-evolution moves (80 % :class:`emcee.moves.DEMove`, 20 %
+:class:`emcee.moves.DESnookerMove`) proposes along the ensemble's own differences and mixed about
+2.7 times faster per step on the benchmark suite's ``run_a`` (autocorrelation times 33-42
+instead of 96-112 steps, 4,200 steps each; the 5-95 % interval of the camera height agreed
+within Monte Carlo noise), so the chain reaches its 50 autocorrelation times in fewer steps.
+``SamplerSettings(moves="stretch")`` restores the stretch move.
+"""
+
+from __future__ import annotations
+
+import time
+from dataclasses import dataclass
+
+import numpy as np
+
+__all__ = ["SamplerSettings", "EmceeSampling", "MOVES"]
+
+#: the move mixtures ``SamplerSettings.moves`` names
+MOVES = ("de", "stretch")
+
+
+@dataclass(frozen=True)
+class SamplerSettings:
+    """Sampling budget and propagation size.
+
+    ``moves``: ``"de"`` (differential evolution, the default) or ``"stretch"`` (emcee's
+    default move).  The chain stops when it is ``tau_multiple`` integrated autocorrelation
+    times long (checked every ``chunk`` steps) or after ``max_steps``."""
+
+    n_walkers: int = 24
+    tau_multiple: float = 50.0
+    max_steps: int = 8000
+    chunk: int = 250
+    burn_in: int = 200
+    n_draws: int = 60
+    bootstrap_noise: bool = True
+    seed: int = 0
+    moves: str = "de"
+
+    def __post_init__(self):
+        if self.moves not in MOVES:
+            raise ValueError(f"moves must be one of {', '.join(MOVES)}, got {self.moves!r}")
+
+    def emcee_moves(self):
+        """The moves argument of :class:`emcee.EnsembleSampler` (None: its default)."""
+        import emcee
+
+        if self.moves == "stretch":
+            return None
+        return [(emcee.moves.DEMove(), 0.8), (emcee.moves.DESnookerMove(), 0.2)]
+
+
+class EmceeSampling:
+    """The sampling half of :class:`probreg.inference.ClipModel` (needs ``param_names``,
+    ``log_prob`` (vectorised over walkers), ``initial_walkers`` and ``timings``)."""
+
+    def sample(self, settings: SamplerSettings = SamplerSettings(), progress=None):
+        """Run emcee; returns ``(sampler, tau)``.
+
+        ``progress(desc, total)``, when given, makes a progress bar (``update(n)``, ``close()``)
+        that counts the steps (burn-in and the budget; it jumps to the end on convergence)."""
+        import emcee
+
+        rng = np.random.default_rng(settings.seed)
+        D = len(self.param_names)
+        if settings.n_walkers < 2 * D:
+            raise ValueError(f"the sampler needs at least {2 * D} walkers for {D} parameters, "
+                             f"got {settings.n_walkers}")
+        p0 = self.initial_walkers(settings.n_walkers, rng)
+        sampler = emcee.EnsembleSampler(settings.n_walkers, D, self.log_prob, vectorize=True,
+                                        moves=settings.emcee_moves())
+        sampler.random_state = np.random.RandomState(settings.seed).get_state()  # reproducible moves
+        t0 = time.perf_counter()
+        total = settings.burn_in + settings.max_steps
+        bar = progress("sampling", total) if progress is not None else None
+        state = sampler.run_mcmc(p0, settings.burn_in, progress=False, skip_initial_state_check=True)
+        if bar is not None:
+            bar.update(settings.burn_in)
+        sampler.reset()
+        tau = np.full(D, np.inf)
+        steps = 0
+        while steps < settings.max_steps:
+            state = sampler.run_mcmc(state, settings.chunk, progress=False, skip_initial_state_check=True)
+            steps += settings.chunk
+            if bar is not None:
+                bar.update(settings.chunk)
+            tau = sampler.get_autocorr_time(tol=0)
+            if np.all(np.isfinite(tau)) and steps >= settings.tau_multiple * np.max(tau):
+                break
+        if bar is not None:
+            bar.update(max(0, total - settings.burn_in - steps))  # converged: the rest of the budget is not needed
+            bar.close()
+        self.timings["sampling_s"] = time.perf_counter() - t0
+        self.sampler = sampler
+        return sampler, tau
