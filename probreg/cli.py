@@ -120,6 +120,7 @@ def _run_options(args):
 
     return RunOptions(priors=priors, sampler=sampler, dist=_parse_dist(args.dist), min_score=args.min_score,
                       overwrite=args.overwrite, camera_side=args.camera_side, progress=_progress(args),
+                      branch=args.branch,
                       lens=args.lens, lens_prior=LensPrior(sd=args.lens_k1_sd))
 
 
@@ -410,6 +411,9 @@ def _add_run_options(p):
                    help="side of the track the camera stands on: main (home straight stands, runner goes "
                         "left to right), far (across the infield); auto decides by evidence (default; "
                         "clip.json 'camera_side' is used when given)")
+    g.add_argument("--branch", choices=("auto", "narrow", "wide"), default="auto",
+                   help="branch of the calibration family: narrow (a long lens far away: the usual broadcast "
+                        "camera), wide (close by, looking down steeply); auto decides by evidence (default)")
     g.add_argument("--overwrite", action="store_true",
                    help="use a non-empty --out that holds files probreg did not write: they are moved aside "
                         "to OUT.previous-<time>, never deleted (a probreg result is replaced without it)")

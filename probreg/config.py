@@ -37,7 +37,8 @@ def _defaults():
     p, smp, run = ModelPriors(), SamplerSettings(), RunOptions()
     return {"height_m": p.camera_height.median, "height_log_sd": p.camera_height.log_sd, "stature": p.stature.mean,
             "stature_sd": p.stature.sd, "walkers": smp.n_walkers, "max_steps": smp.max_steps, "draws": smp.n_draws,
-            "seed": smp.seed, "moves": smp.moves, "camera_side": run.camera_side, "min_score": run.min_score, "lens": run.lens,
+            "seed": smp.seed, "moves": smp.moves, "camera_side": run.camera_side, "branch": run.branch,
+            "min_score": run.min_score, "lens": run.lens,
             "lens_k1_sd": run.lens_prior.sd}
 
 
@@ -65,6 +66,8 @@ CONFIG_KEYS = (
         "known lens distortion [k1, k2, p1, p2, k3] (OpenCV order); [] = none assumed"),
     Key("camera", "side", "camera_side", str, _D["camera_side"],
         "'auto' (decided by the athlete's motion), 'main' (home-straight stands) or 'far' (across the infield)"),
+    Key("camera", "branch", "branch", str, _D["branch"],
+        "family branch: 'auto' (decided by evidence), 'narrow' (long lens far away) or 'wide' (close, steep)"),
     Key("detection", "model", "model", str, "", "ONNX pose model for videos (YOLO-pose or top-down); '' = none"),
     Key("detection", "det_model", "det_model", str, "", "ONNX person detector for a top-down model; '' = none"),
     Key("detection", "min_score", "min_score", float, _D["min_score"], "keypoints below this confidence are missing"),

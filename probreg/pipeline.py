@@ -37,6 +37,7 @@ from .geometry import JOINT_NAMES
 from .inference import ModelPriors, angle_bands, gait_cycle_bands, gait_intervals
 from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationError
 from .inference.sampling import SamplerSettings
+from .inference.evidence import BRANCHES, BranchChoice, laplace_log_evidence
 from .inference.verdict import bone_length_cv, clip_verdict
 from .io.clip import ClipFormatError, load_clip, write_json
 from .io.frames import has_frames
@@ -60,7 +61,8 @@ class RunOptions:
     lens: str = "infer"
     lens_prior: LensPrior = field(default_factory=LensPrior)
     min_score: float = 0.3
-    branch: str = "narrow"
+    # the family branch: "auto" (decided by evidence, probreg.inference.evidence), "narrow" or "wide"
+    branch: str = "auto"
     report: bool = True
     # move a non-empty output folder that holds files probreg did not write aside (never deleted)
     overwrite: bool = False
@@ -92,6 +94,8 @@ class RunResult:
     # run.json's "lens" and "band_decomposition"
     lens: dict = field(default_factory=dict)
     band_decomposition: dict = field(default_factory=dict)
+    # the family branch (probreg.inference.evidence.BranchChoice)
+    branch: object = None
 
 
 def _arviz():
@@ -235,6 +239,53 @@ def _write_uncalibrated(clip, reg, side, out_dir, options, message, t0, log, inp
     return result
 
 
+def _branch_models(clip, reg, options, given, log):
+    """The clip model of every family branch asked for (``options.branch``: ``"auto"`` tries
+    both, :mod:`probreg.inference.evidence`), each with its own camera side and lens, and the
+    one the evidence picks: ``(registration, side, lens, model, BranchChoice)``.  Raises
+    :class:`NoCalibrationError` when no branch has a camera."""
+    import copy
+
+    t0 = time.perf_counter()
+    branches = BRANCHES if options.branch == "auto" else (options.branch,)
+    if options.branch not in (*BRANCHES, "auto"):
+        raise ValueError(f"branch must be auto, narrow or wide, got {options.branch!r}")
+    cands, errors = {}, {}
+    for b in branches:
+        r = copy.deepcopy(reg) if len(branches) > 1 else reg  # orienting rebuilds the families
+        side = r.orient(options.priors.camera_height.centre(), clip.keypoints_px, b, fps=clip.fps, given=given)
+        lens, model_reg = None, r
+        if options.dist is None and options.lens == "infer":
+            lens, model_reg = lens_registration(r, options.lens_prior, height_m=options.priors.camera_height.centre())
+        try:
+            model = ClipModel(model_reg, clip.keypoints_px, clip.fps, clip.athlete_lane, priors=options.priors,
+                              dist=options.dist, branch=b, lens=lens)
+        except NoCalibrationError as exc:
+            errors[b] = str(exc)
+            reg.camera_side = r.camera_side
+            continue
+        cands[b] = (r, side, lens, model)
+    if not cands:
+        raise NoCalibrationError(next(iter(errors.values())))
+    if len(cands) > 1:
+        logz = {b: laplace_log_evidence(m, seed=options.sampler.seed)[0] for b, (_, _, _, m) in cands.items()}
+        chosen = max(logz, key=logz.get)
+        choice = BranchChoice(chosen, "evidence", logz, errors)
+    else:
+        chosen = next(iter(cands))
+        choice = BranchChoice(chosen, "given" if options.branch != "auto" else "only",
+                              {b: None for b in branches}, errors)
+    r, side, lens, model = cands[chosen]
+    model.timings["branch_s"] = time.perf_counter() - t0
+    log(f"camera side: {side.chosen} ({side.source}; log-evidence ratio {side.log_ratio:.1f})")
+    log(f"family branch: {chosen} ({choice.source}"
+        + (f"; log-evidence ratio {choice.log_ratio:.1f}" if np.isfinite(choice.log_ratio) else "") + ")")
+    if lens is not None:
+        log(f"lens: k1 from the lane lines (corner shift {lens.kappa_star * lens.evidence.r_ref:+.2f} px "
+            f"at the best fit; {lens.evidence.n_frames} frames, {lens.evidence.n_lines} lines)")
+    return r, side, lens, model, choice
+
+
 def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, protect=(), extra_files=None):
     """Run the full pipeline on a clip folder and write the result folder.
 
@@ -269,23 +320,13 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     reg = register_clip(clip, progress=options.progress)
     t1 = time.perf_counter()
     log(f"lanes: {reg.status_counts()} ({t1 - t0:.1f} s)")
-    side = reg.orient(options.priors.camera_height.centre(), clip.keypoints_px, options.branch, fps=clip.fps,
-                      given=given)
-    log(f"camera side: {side.chosen} ({side.source}; log-evidence ratio {side.log_ratio:.1f})")
-    lens = None
-    model_reg = reg
-    if options.dist is None and options.lens == "infer":
-        lens, model_reg = lens_registration(reg, options.lens_prior, height_m=options.priors.camera_height.centre())
-        if lens is not None:
-            log(f"lens: k1 from the lane lines (corner shift {lens.kappa_star * lens.evidence.r_ref:+.2f} px "
-                f"at the best fit; {lens.evidence.n_frames} frames, {lens.evidence.n_lines} lines)")
-    elif options.lens not in ("infer", "none"):
+    if options.lens not in ("infer", "none"):
         raise ValueError(f"lens must be 'infer' or 'none', got {options.lens!r}")
     try:
-        model = ClipModel(model_reg, clip.keypoints_px, clip.fps, clip.athlete_lane, priors=options.priors,
-                          dist=options.dist, branch=options.branch, lens=lens)
+        reg, side, lens, model, branch = _branch_models(clip, reg, options, given, log)
     except NoCalibrationError as exc:
-        return _write_uncalibrated(clip, reg, side, out_dir, options, str(exc), t0, log, inputs, extra_files)
+        return _write_uncalibrated(clip, reg, reg.camera_side, out_dir, options, str(exc), t0, log, inputs,
+                                   extra_files)
     sampler, tau = model.sample(options.sampler, progress=options.progress)
     chain = sampler.get_chain()  # (steps, walkers, D)
     flat = chain.reshape(-1, chain.shape[-1])
@@ -321,7 +362,9 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     verdict, reasons = clip_verdict(
         clip.n_frames, calibrated=sum(c is not None for c in cam_list), frames_with_angles=n_angle,
         rhat=diag["rhat_height"], ess=diag["ess_height"], log_height_draws=flat[:, 0],
-        log_height_prior_sd=getattr(prior_h, "log_sd", None), side=side, bone_cv_pct=bone_length_cv(joints_med))
+        log_height_prior_sd=getattr(prior_h, "log_sd", None), side=side, bone_cv_pct=bone_length_cv(joints_med),
+        speed_mps=gait_s.get("speed_mps", {}).get("median"), step_m=gait_s.get("step_length_m", {}).get("median"),
+        stature_draws=flat[:, 1], stature_prior=options.priors.stature, branch=branch)
     with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=inputs, log=log) as tmp:
         _copy_extra(tmp, extra_files)
         write_angles_csv(tmp / "angles.csv", clip.fps, {k: v[0] for k, v in summ.items()},
@@ -341,7 +384,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         extra = {} if clip.keypoints_outside is None else {
             "keypoints_outside_image": clip.keypoints_outside.tolist()}
         write_json(tmp / "run.json", {"verdict": verdict, "verdict_reasons": reasons,
-                                     "camera_side": side.to_dict(),
+                                     "camera_side": side.to_dict(), "branch": branch.to_json(),
                                      "input_notes": list(clip.notes), **extra,
                                      "diagnostics": diag, "timings_s": timings, "height_m": height,
                                      "lens": lens_doc, "band_decomposition": decomposition,
@@ -353,7 +396,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
                            gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
                            verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,
-                           frame_status=status, lens=lens_doc, band_decomposition=decomposition)
+                           frame_status=status, lens=lens_doc, band_decomposition=decomposition,
+                           branch=branch)
         if options.report:
             from .report.html import run_report
 

@@ -46,6 +46,10 @@ def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=
     # outlier scale: a clean track's own curvature at turning points must not look like an outlier
     scale = max(1.0, 2.0 * noise) if np.isfinite(noise) else 1.0
     out = kp.copy()
+    # raw detections: the cross-stride smoother rejects outliers itself and fills short gaps
+    sm = periodic_smooth(kp, fps, fill_max_gap=max_gap) if periodic else None
+    done = (np.all(np.isfinite(kp[..., :2]), -1).sum(0) >= len(kp) // 2 if sm is not None  # joints it took
+            else np.zeros(kp.shape[1], bool))
     for j in range(kp.shape[1]):
         cols = []
         for c in range(2):
@@ -55,17 +59,15 @@ def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=
         bad = ~np.isfinite(cols[0]) | ~np.isfinite(cols[1])
         for c in range(2):
             x = fill_gaps(np.where(bad, np.nan, cols[c]), max_gap)
-            out[:, j, c] = butterworth(x, fps, cutoff_hz) if cutoff_hz else x
+            # the smoother's joints take its fit (the low-pass would be overwritten; its NaNs are
+            # those of ``x``, which is all the score bookkeeping below needs)
+            out[:, j, c] = butterworth(x, fps, cutoff_hz) if cutoff_hz and not done[j] else x
         filled = np.isfinite(out[:, j, 0]) & ~np.isfinite(kp[:, j, 2])
         out[filled, j, 2] = 0.5
         out[~np.isfinite(out[:, j, 0]), j] = np.nan
-    if periodic:
-        # raw detections: the smoother rejects outliers itself and fills short gaps
-        sm = periodic_smooth(kp, fps, fill_max_gap=max_gap)
-        if sm is not None:  # else: clip without repeating strides, keep the low-pass
-            done = np.all(np.isfinite(kp[..., :2]), -1).sum(0) >= len(kp) // 2  # joints it took
-            use = done[None, :] & np.all(np.isfinite(sm[..., :2]), -1)
-            out[..., :2] = np.where(use[..., None], sm[..., :2], out[..., :2])
-            out[use & ~np.isfinite(kp[..., 2]), 2] = 0.5
-            out[done[None, :] & ~use] = np.nan
+    if sm is not None:  # else: clip without repeating strides (or not noisy), keep the low-pass
+        use = done[None, :] & np.all(np.isfinite(sm[..., :2]), -1)
+        out[..., :2] = np.where(use[..., None], sm[..., :2], out[..., :2])
+        out[use & ~np.isfinite(kp[..., 2]), 2] = 0.5
+        out[done[None, :] & ~use] = np.nan
     return out

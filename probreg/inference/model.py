@@ -46,6 +46,7 @@ keypoints), giving joint and angle samples and so credible bands.
 from __future__ import annotations
 
 import time
+import warnings
 
 import numpy as np
 
@@ -498,7 +499,10 @@ class ClipModel(DrawPropagation, EmceeSampling):
         point = np.column_stack([tr.position_m, np.zeros(self.F)])
         P = _plane_hits(cams.C, pixel_rays(cams, self.kp[..., :2]), point, tr.left)
         depth = np.linalg.norm(P[:, J["pelvis"]] - cams.C, axis=-1)
-        sd_m = np.nanmedian(self.noise_sd * depth / cams.focal_px) if np.isfinite(self.noise_sd) else 0.0
+        with warnings.catch_warnings():  # no pelvis in front of the camera in any frame: no noise term
+            warnings.simplefilter("ignore", RuntimeWarning)
+            sd_m = np.nanmedian(self.noise_sd * depth / cams.focal_px) if np.isfinite(self.noise_sd) else 0.0
+        sd_m = float(sd_m) if np.isfinite(sd_m) else 0.0
         for s in OBSERVED_SEGMENTS:
             lens = np.concatenate([np.linalg.norm(P[:, J[b]] - P[:, J[a]], axis=-1) for a, b in SEGMENT_BONES[s]])
             lens = lens[np.isfinite(lens)]

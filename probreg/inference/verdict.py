@@ -17,11 +17,29 @@ reason of its own, a short machine-readable string with the number that triggere
 ``camera_side evidence ratio x`` / ``(cues disagree)``
     the side of the track the camera stands on is not settled by the athlete's motion
     (:mod:`probreg.calibration.side`).
+``branch evidence ratio x``
+    the two branches of the calibration family (a camera far away with a long lens, or one
+    close by looking down steeply: :mod:`probreg.inference.evidence`) explain the clip about
+    equally well (evidence ratio below 20): the scale of everything hangs on the choice.
 ``bone length cv x %``
     the lifting holds every limb at one length; the posterior-median skeleton varies only
     where rays miss their limb spheres or the draws disagree on the body's configuration.
     A coefficient of variation above 15 % (a clean lifting stays under ~7 % on noisy 2D)
     means camera and skeleton do not fit together.
+``running speed x m/s``
+    the lifted athlete runs faster than any human can (above
+    :attr:`VerdictThresholds.max_speed_mps`, 13 m/s: the fastest measured sprint speeds are
+    about 12.4 m/s): the lane lines were read into a camera that puts the athlete at the wrong
+    scale (e.g. nearly parallel lines in a steep view), so every length and angle is suspect.
+``step length x m``
+    the same for the length of a step (above :attr:`VerdictThresholds.max_step_m`, 3 m: the
+    longest steps of elite sprinters are about 2.7 m).
+``stature prior conflict (...)``
+    the athlete's stature posterior sits far outside its prior (two-sided prior tail
+    probability of the posterior median below :attr:`VerdictThresholds.min_prior_tail`, 0.001:
+    beyond 3.3 sd).  The prior holds every adult athlete (1.50-2.10 m at the defaults); a
+    posterior out there means the camera makes the limbs the wrong size, not that the athlete is
+    1 m tall.
 ``prior-dominated height (...)``
     the camera height's posterior is hardly narrower than its prior: the clip did not
     measure it, and every metric number rests on the prior.
@@ -51,6 +69,10 @@ class VerdictThresholds:
     max_bone_cv_pct: float = 15.0
     max_prior_sd_ratio: float = 0.5
     min_side_log_ratio: float = float(np.log(20.0))
+    min_branch_log_ratio: float = float(np.log(20.0))
+    max_speed_mps: float = 13.0
+    max_step_m: float = 3.0
+    min_prior_tail: float = 0.001
 
 
 def bone_length_cv(joints_track_m):
@@ -116,8 +138,8 @@ def posterior_modes(samples, min_rel_height=0.1, max_dip=0.5, n_grid=512):
 
 
 def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, log_height_draws=None,
-                 log_height_prior_sd=None, side=None, bone_cv_pct=None,
-                 thresholds: VerdictThresholds = VerdictThresholds()):
+                 log_height_prior_sd=None, side=None, bone_cv_pct=None, speed_mps=None,
+                 step_m=None, stature_draws=None, stature_prior=None, branch=None, thresholds: VerdictThresholds = VerdictThresholds()):
     """The clip verdict and its reasons.
 
     Parameters
@@ -136,6 +158,13 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
     side : CameraSide, optional
     bone_cv_pct : dict, optional
         :func:`bone_length_cv` of the posterior-median joints.
+    speed_mps, step_m : float, optional
+        The posterior medians of the athlete's running speed and step length.
+    branch : BranchChoice, optional
+        The family branch chosen (:class:`probreg.inference.evidence.BranchChoice`).
+    stature_draws : ndarray, optional
+        Posterior draws of the stature, with ``stature_prior`` (a
+        :class:`probreg.inference.NormalPrior`) its prior.
 
     Returns
     -------
@@ -145,6 +174,8 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
 
     >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900)
     ('ok', [])
+    >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, speed_mps=33.0)
+    ('unreliable', ['running speed 33.0 m/s'])
     >>> clip_verdict(100, 0, 0)
     ('uncalibrated', ['frames_with_angles 0/100', 'calibrated_frames 0/100'])
     """
@@ -172,9 +203,23 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
         if side.log_ratio < t.min_side_log_ratio or side.cues_disagree:
             reasons.append(f"camera_side evidence ratio {np.exp(min(side.log_ratio, 50.0)):.3g}"
                            + (" (cues disagree)" if side.cues_disagree else ""))
+    if branch is not None and branch.source == "evidence" and branch.log_ratio < t.min_branch_log_ratio:
+        reasons.append(f"branch evidence ratio {np.exp(min(branch.log_ratio, 50.0)):.3g}")
     if bone_cv_pct:
         worst = max(bone_cv_pct, key=lambda k: np.nan_to_num(bone_cv_pct[k], nan=-1))
         if np.isfinite(bone_cv_pct[worst]) and bone_cv_pct[worst] > t.max_bone_cv_pct:
             reasons.append(f"bone length cv {bone_cv_pct[worst]:.0f} % ({worst})")
+    if speed_mps is not None and np.isfinite(speed_mps) and speed_mps > t.max_speed_mps:
+        reasons.append(f"running speed {speed_mps:.1f} m/s")
+    if step_m is not None and np.isfinite(step_m) and step_m > t.max_step_m:
+        reasons.append(f"step length {step_m:.1f} m")
+    if stature_draws is not None and getattr(stature_prior, "sd", None) and len(np.ravel(stature_draws)):
+        from scipy.stats import norm
+
+        med = float(np.median(stature_draws))
+        tail = float(2 * norm.sf(abs(med - stature_prior.mean) / stature_prior.sd))
+        if tail < t.min_prior_tail:
+            reasons.append(f"stature prior conflict (posterior {med:.2f} m, prior {stature_prior.mean:.2f} "
+                           f"+- {stature_prior.sd:.2f} m)")
     verdict = "uncalibrated" if uncal else ("unreliable" if reasons else "ok")
     return verdict, reasons

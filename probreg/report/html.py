@@ -431,11 +431,11 @@ def sampler_figure(idata, max_points=800):
             axes[row, 0].plot(x, c[::step], lw=0.4, alpha=0.6)
         axes[row, 0].set_ylabel(var)
         h, uniform = rank_histograms(vals)
-        width = 1.0 / h.shape[1]
-        for k, counts in enumerate(h):  # one row of bars per chain, as ArviZ draws them
-            axes[row, 1].bar(np.arange(h.shape[1]) * width, counts / (2.2 * uniform), width=width, bottom=k,
-                             align="edge", lw=0, alpha=0.8)
-            axes[row, 1].axhline(k + 1 / 2.2, color="k", lw=0.3, ls="--")
+        edges = np.linspace(0.0, 1.0, h.shape[1] + 1)
+        for k, counts in enumerate(h):  # one row of bars per chain, as ArviZ draws them (one artist per row)
+            axes[row, 1].stairs(k + counts / (2.2 * uniform), edges, baseline=k, fill=True, alpha=0.8,
+                                color=f"C{k % 10}")
+        axes[row, 1].hlines(np.arange(len(h)) + 1 / 2.2, 0.0, 1.0, colors="k", lw=0.3, ls="--")
         axes[row, 1].set_yticks([])
         axes[row, 1].set_ylabel("walker")
         axes[row, 1].set_xlabel("rank among all draws (fraction)" if row == 1 else "")

@@ -93,3 +93,39 @@ def test_inconsistent_bone_lengths_are_unreliable(rng):
     broken[::3, JOINT_INDEX["l_ankle"]] = [0, 0.6, 0.3]  # every third shank is 70 % too long
     v, r = clip_verdict(**GOOD, bone_cv_pct=bone_length_cv(broken))
     assert v == "unreliable" and r[0].startswith("bone length cv") and r[0].endswith("(shank)")
+
+
+def test_a_superhuman_running_speed_is_unreliable():
+    # a camera that puts the athlete at the wrong scale makes them run 33 m/s; the fastest
+    # sprinters reach about 12.4 m/s, a sprint at 11.5 m/s is fine
+    assert clip_verdict(**GOOD, speed_mps=33.04) == ("unreliable", ["running speed 33.0 m/s"])
+    assert clip_verdict(**GOOD, speed_mps=11.5) == ("ok", [])
+    assert clip_verdict(**GOOD, speed_mps=float("nan")) == ("ok", [])
+
+
+def test_an_impossible_step_length_is_unreliable():
+    assert clip_verdict(**GOOD, step_m=7.15) == ("unreliable", ["step length 7.2 m"])
+    assert clip_verdict(**GOOD, step_m=2.4) == ("ok", [])
+    assert clip_verdict(**GOOD, step_m=None) == ("ok", [])
+
+
+def test_a_stature_far_outside_its_prior_is_a_conflict():
+    from probreg.inference import NormalPrior
+
+    rng = np.random.default_rng(4)
+    prior = NormalPrior(1.80, 0.16)
+    verdict, reasons = clip_verdict(**GOOD, stature_draws=rng.normal(0.98, 0.03, 2000), stature_prior=prior)
+    assert verdict == "unreliable" and reasons == ["stature prior conflict (posterior 0.98 m, prior 1.80 +- 0.16 m)"]
+    # a short junior (1.52 m, 1.75 sd below the prior mean) is no conflict
+    assert clip_verdict(**GOOD, stature_draws=rng.normal(1.52, 0.03, 2000), stature_prior=prior) == ("ok", [])
+
+
+def test_an_undecided_family_branch_is_unreliable():
+    from probreg.inference.evidence import BranchChoice
+
+    close = BranchChoice("narrow", "evidence", {"narrow": -50.0, "wide": -51.5})
+    assert clip_verdict(**GOOD, branch=close) == ("unreliable", ["branch evidence ratio 4.48"])
+    clear = BranchChoice("wide", "evidence", {"narrow": -232.5, "wide": -93.2})
+    assert clip_verdict(**GOOD, branch=clear) == ("ok", [])
+    given = BranchChoice("narrow", "given", {"narrow": None})
+    assert clip_verdict(**GOOD, branch=given) == ("ok", [])
