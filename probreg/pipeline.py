@@ -239,46 +239,107 @@ def _write_uncalibrated(clip, reg, side, out_dir, options, message, t0, log, inp
     return result
 
 
+def _branch_candidate(clip, reg, options, given, branch):
+    """One branch's ``(registration, side, lens, model)`` (raises :class:`NoCalibrationError`)."""
+    side = reg.orient(options.priors.camera_height.centre(), clip.keypoints_px, branch, fps=clip.fps, given=given)
+    lens, model_reg = None, reg
+    if options.dist is None and options.lens == "infer":
+        lens, model_reg = lens_registration(reg, options.lens_prior, height_m=options.priors.camera_height.centre())
+    model = ClipModel(model_reg, clip.keypoints_px, clip.fps, clip.athlete_lane, priors=options.priors,
+                      dist=options.dist, branch=branch, lens=lens)
+    return reg, side, lens, model
+
+
+def _forked_evidence(clip, reg, options, given, branch):
+    """Start the log evidence of ``branch`` in a forked process (the caller builds the other
+    branch meanwhile: on two cores the second branch costs no wall time); returns a function
+    that waits for ``("ok", log_z)`` or ``("error", message)``.  Without ``fork`` (or with one
+    worker) the work is done when the result is asked for."""
+    import multiprocessing as mp
+
+    from .inference.propagation import _default_workers
+
+    def work():
+        try:
+            return "ok", laplace_log_evidence(_branch_candidate(clip, reg, options, given, branch)[3],
+                                              seed=options.sampler.seed)[0]
+        except NoCalibrationError as exc:
+            return "error", str(exc)
+
+    if _default_workers() < 2 or "fork" not in mp.get_all_start_methods():
+        return work
+    ctx = mp.get_context("fork")
+    receive, send = ctx.Pipe(duplex=False)
+
+    def child():
+        from threadpoolctl import threadpool_limits
+
+        try:
+            with threadpool_limits(limits=1):
+                send.send(work())
+        except BaseException as exc:  # any failure must reach the parent, not hang it
+            send.send(("failed", f"{type(exc).__name__}: {exc}"))
+        finally:
+            send.close()
+
+    try:
+        proc = ctx.Process(target=child, daemon=True)
+        proc.start()
+    except OSError:  # no processes allowed here
+        return work
+    send.close()
+
+    def result():
+        try:
+            out = receive.recv()
+        except EOFError:  # the process died (killed, out of memory): do it here
+            out = ("failed", "evidence process died")
+        proc.join()
+        return work() if out[0] == "failed" else out
+    return result
+
+
 def _branch_models(clip, reg, options, given, log):
-    """The clip model of every family branch asked for (``options.branch``: ``"auto"`` tries
-    both, :mod:`probreg.inference.evidence`), each with its own camera side and lens, and the
-    one the evidence picks: ``(registration, side, lens, model, BranchChoice)``.  Raises
-    :class:`NoCalibrationError` when no branch has a camera."""
+    """The clip model of the family branch the evidence picks (``options.branch``: ``"auto"``
+    compares both, :mod:`probreg.inference.evidence`), with its own camera side and lens:
+    ``(registration, side, lens, model, BranchChoice)``.  Raises :class:`NoCalibrationError`
+    when no branch has a camera."""
     import copy
 
     t0 = time.perf_counter()
-    branches = BRANCHES if options.branch == "auto" else (options.branch,)
     if options.branch not in (*BRANCHES, "auto"):
         raise ValueError(f"branch must be auto, narrow or wide, got {options.branch!r}")
-    cands, errors = {}, {}
-    for b in branches:
-        r = copy.deepcopy(reg) if len(branches) > 1 else reg  # orienting rebuilds the families
-        side = r.orient(options.priors.camera_height.centre(), clip.keypoints_px, b, fps=clip.fps, given=given)
-        lens, model_reg = None, r
-        if options.dist is None and options.lens == "infer":
-            lens, model_reg = lens_registration(r, options.lens_prior, height_m=options.priors.camera_height.centre())
-        try:
-            model = ClipModel(model_reg, clip.keypoints_px, clip.fps, clip.athlete_lane, priors=options.priors,
-                              dist=options.dist, branch=b, lens=lens)
-        except NoCalibrationError as exc:
-            errors[b] = str(exc)
-            reg.camera_side = r.camera_side
-            continue
-        cands[b] = (r, side, lens, model)
-    if not cands:
-        raise NoCalibrationError(next(iter(errors.values())))
-    if len(cands) > 1:
-        logz = {b: laplace_log_evidence(m, seed=options.sampler.seed)[0] for b, (_, _, _, m) in cands.items()}
-        chosen = max(logz, key=logz.get)
-        choice = BranchChoice(chosen, "evidence", logz, errors)
+    if options.branch != "auto":
+        cand = _branch_candidate(clip, reg, options, given, options.branch)
+        choice = BranchChoice(options.branch, "given", {options.branch: None})
     else:
-        chosen = next(iter(cands))
-        choice = BranchChoice(chosen, "given" if options.branch != "auto" else "only",
-                              {b: None for b in branches}, errors)
-    r, side, lens, model = cands[chosen]
+        # the narrow branch (the usual broadcast camera) is built here, the wide one's evidence
+        # comes from a forked process meanwhile; the wide model is built here only if it wins
+        wide = _forked_evidence(clip, copy.deepcopy(reg), options, given, "wide")
+        logz, errors, cand = {}, {}, None
+        try:
+            cand = _branch_candidate(clip, copy.deepcopy(reg), options, given, "narrow")
+            logz["narrow"] = laplace_log_evidence(cand[3], seed=options.sampler.seed)[0]
+        except NoCalibrationError as exc:
+            errors["narrow"] = str(exc)
+        status, value = wide()
+        if status == "ok":
+            logz["wide"] = float(value)
+        else:
+            errors["wide"] = str(value)
+        if not logz:
+            reg.camera_side = reg.orient(options.priors.camera_height.centre(), clip.keypoints_px, "narrow",
+                                         fps=clip.fps, given=given)
+            raise NoCalibrationError(errors.get("narrow") or errors.get("wide"))
+        chosen = max(logz, key=logz.get)
+        choice = BranchChoice(chosen, "evidence" if len(logz) > 1 else "only",
+                              {b: logz.get(b) for b in BRANCHES}, errors)
+        if chosen == "wide":
+            cand = _branch_candidate(clip, reg, options, given, "wide")
+    r, side, lens, model = cand
     model.timings["branch_s"] = time.perf_counter() - t0
     log(f"camera side: {side.chosen} ({side.source}; log-evidence ratio {side.log_ratio:.1f})")
-    log(f"family branch: {chosen} ({choice.source}"
+    log(f"family branch: {choice.chosen} ({choice.source}"
         + (f"; log-evidence ratio {choice.log_ratio:.1f}" if np.isfinite(choice.log_ratio) else "") + ")")
     if lens is not None:
         log(f"lens: k1 from the lane lines (corner shift {lens.kappa_star * lens.evidence.r_ref:+.2f} px "

@@ -62,7 +62,7 @@ class BranchChoice:
                           "(probreg.inference.evidence)"}
 
 
-def laplace_log_evidence(model, seed=0, n_walkers=24, burn_in=300, steps=600):
+def laplace_log_evidence(model, seed=0, n_walkers=24, burn_in=200, steps=400):
     """Laplace estimate of the log marginal likelihood of a clip model (see the module docstring).
 
     ``model`` needs ``param_names``, ``log_prob`` (vectorised) and ``initial_walkers``; the run

@@ -207,6 +207,10 @@ PRESETS = {
                       offset_frac=(0.0, 0.0)),
     "distorted": _preset(None, dist=lambda r: (_u(r, -0.12, -0.04), _u(r, 0.0, 0.05), 0.0, 0.0, 0.0),
                          athlete_height_px=lambda r: _u(r, 200, 300)),
+    # a camera high up close to the track looking down steeply: its calibration lies on the
+    # family's wide branch (probreg.inference.evidence)
+    "steep_near": _preset(None, height_m=lambda r: _u(r, 18, 30), distance_m=lambda r: _u(r, 15, 30),
+                          athlete_height_px=lambda r: _u(r, 250, 400)),
     # a broadcast zoom lens at its wide end, close to the track: |k1| 0.1-0.25, either sign
     # (the lens development set of issue 27; the held-out set's wide near views are separate)
     "wide_lens": _preset(None, distance_m=lambda r: _u(r, 10, 25), height_m=lambda r: _u(r, 3, 10),
