@@ -31,9 +31,6 @@ reason of its own, a short machine-readable string with the number that triggere
     :attr:`VerdictThresholds.max_speed_mps`, 13 m/s: the fastest measured sprint speeds are
     about 12.4 m/s): the lane lines were read into a camera that puts the athlete at the wrong
     scale (e.g. nearly parallel lines in a steep view), so every length and angle is suspect.
-``step length x m``
-    the same for the length of a step (above :attr:`VerdictThresholds.max_step_m`, 3 m: the
-    longest steps of elite sprinters are about 2.7 m).
 ``stature prior conflict (...)``
     the athlete's stature posterior sits far outside its prior (two-sided prior tail
     probability of the posterior median below :attr:`VerdictThresholds.min_prior_tail`, 0.001:
@@ -71,7 +68,6 @@ class VerdictThresholds:
     min_side_log_ratio: float = float(np.log(20.0))
     min_branch_log_ratio: float = float(np.log(20.0))
     max_speed_mps: float = 13.0
-    max_step_m: float = 3.0
     min_prior_tail: float = 0.001
 
 
@@ -139,7 +135,7 @@ def posterior_modes(samples, min_rel_height=0.1, max_dip=0.5, n_grid=512):
 
 def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, log_height_draws=None,
                  log_height_prior_sd=None, side=None, bone_cv_pct=None, speed_mps=None,
-                 step_m=None, stature_draws=None, stature_prior=None, branch=None, thresholds: VerdictThresholds = VerdictThresholds()):
+                 stature_draws=None, stature_prior=None, branch=None, thresholds: VerdictThresholds = VerdictThresholds()):
     """The clip verdict and its reasons.
 
     Parameters
@@ -158,8 +154,10 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
     side : CameraSide, optional
     bone_cv_pct : dict, optional
         :func:`bone_length_cv` of the posterior-median joints.
-    speed_mps, step_m : float, optional
-        The posterior medians of the athlete's running speed and step length.
+    speed_mps : float, optional
+        The posterior median of the athlete's running speed (the speed, not the step length:
+        that is the speed over the cadence, and a short clip's few contacts can miss the
+        cadence by a third).
     branch : BranchChoice, optional
         The family branch chosen (:class:`probreg.inference.evidence.BranchChoice`).
     stature_draws : ndarray, optional
@@ -211,8 +209,6 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
             reasons.append(f"bone length cv {bone_cv_pct[worst]:.0f} % ({worst})")
     if speed_mps is not None and np.isfinite(speed_mps) and speed_mps > t.max_speed_mps:
         reasons.append(f"running speed {speed_mps:.1f} m/s")
-    if step_m is not None and np.isfinite(step_m) and step_m > t.max_step_m:
-        reasons.append(f"step length {step_m:.1f} m")
     if stature_draws is not None and getattr(stature_prior, "sd", None) and len(np.ravel(stature_draws)):
         from scipy.stats import norm
 

@@ -103,12 +103,6 @@ def test_a_superhuman_running_speed_is_unreliable():
     assert clip_verdict(**GOOD, speed_mps=float("nan")) == ("ok", [])
 
 
-def test_an_impossible_step_length_is_unreliable():
-    assert clip_verdict(**GOOD, step_m=7.15) == ("unreliable", ["step length 7.2 m"])
-    assert clip_verdict(**GOOD, step_m=2.4) == ("ok", [])
-    assert clip_verdict(**GOOD, step_m=None) == ("ok", [])
-
-
 def test_a_stature_far_outside_its_prior_is_a_conflict():
     from probreg.inference import NormalPrior
 
