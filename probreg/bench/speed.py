@@ -101,6 +101,11 @@ def run(args=None):
         stages = [("start-up (python -m probreg --help)", t_help),
                   ("lanes (decode included)", timings["lanes_s"]), ("precompute", timings["precompute_s"]),
                   ("sampling (emcee)", timings["sampling_s"]), ("propagation", timings["propagation_s"])]
+        if "branch_s" in timings:  # it holds the chosen model's precompute (listed above)
+            stages.append(("lens inference and the family branch (both branches' evidence)",
+                           timings["branch_s"] - timings["precompute_s"]))
+        if "decomposition_s" in timings:
+            stages.append(("band decomposition", timings["decomposition_s"]))
         known = sum(v for _, v in stages)
         stages.append(("imports of the run, writing, posterior.nc, report (the rest)", best - known))
         rep.add(f"Clip: `{clip.name}`, {F} frames, {meta['image_size'][0]}x{meta['image_size'][1]}, "
