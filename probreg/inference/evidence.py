@@ -23,6 +23,7 @@ of nats where they differ at all, far beyond the approximation's error.
 
 from __future__ import annotations
 
+import warnings
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -91,9 +92,13 @@ def laplace_log_evidence(model, seed=0, n_walkers=24, burn_in=200, steps=400):
     sampler = emcee.EnsembleSampler(n_walkers, D, model.log_prob, vectorize=True,
                                     moves=SamplerSettings(moves="de").emcee_moves())
     sampler.random_state = np.random.RandomState(seed).get_state()
-    state = sampler.run_mcmc(p0, burn_in, progress=False, skip_initial_state_check=True)
-    sampler.reset()
-    sampler.run_mcmc(state, steps, progress=False, skip_initial_state_check=True)
+    with warnings.catch_warnings():
+        # a branch whose cameras cannot explain the clip may leave walkers at -inf: emcee's
+        # acceptance test then subtracts infinities (the walker stays; its draws are dropped below)
+        warnings.simplefilter("ignore", RuntimeWarning)
+        state = sampler.run_mcmc(p0, burn_in, progress=False, skip_initial_state_check=True)
+        sampler.reset()
+        sampler.run_mcmc(state, steps, progress=False, skip_initial_state_check=True)
     draws = sampler.get_chain().reshape(-1, D)
     lp = sampler.get_log_prob().ravel()
     ok = np.isfinite(lp)

@@ -180,7 +180,8 @@ def detect_contacts(ankles_m, fps, config: TrackConfig = TrackConfig(), camera_x
             est = np.sum(vel * across, -1) / share
         use = np.isfinite(est) & (np.abs(share) >= 0.3)
         speed = np.where(use, est, speed)
-    with np.errstate(invalid="ignore"):
+    with np.errstate(invalid="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # no finite speed at all: NaN, the default below
         run = np.nanmedian(np.abs(np.diff(body @ direction))) * fps if ok.sum() > 1 else np.nan
         run = np.nanmedian(np.abs(speed)) if not np.isfinite(run) else run
     thr = config.contact_speed_frac * run if np.isfinite(run) and run > 0.5 else 1.0
