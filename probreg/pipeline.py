@@ -285,7 +285,9 @@ def _forked_evidence(clip, reg, options, given, branch):
     try:
         proc = ctx.Process(target=child, daemon=True)
         proc.start()
-    except OSError:  # no processes allowed here
+    except (OSError, AssertionError):  # no processes allowed here (sandbox; a daemonic process's child)
+        send.close()
+        receive.close()
         return work
     send.close()
 
