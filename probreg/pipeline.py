@@ -309,8 +309,6 @@ def _branch_models(clip, reg, options, given, log):
     import copy
 
     t0 = time.perf_counter()
-    if options.branch not in (*BRANCHES, "auto"):
-        raise ValueError(f"branch must be auto, narrow or wide, got {options.branch!r}")
     if options.branch != "auto":
         cand = _branch_candidate(clip, reg, options, given, options.branch)
         choice = BranchChoice(options.branch, "given", {options.branch: None})
@@ -330,8 +328,8 @@ def _branch_models(clip, reg, options, given, log):
         else:
             errors["wide"] = str(value)
         if not logz:
-            reg.camera_side = reg.orient(options.priors.camera_height.centre(), clip.keypoints_px, "narrow",
-                                         fps=clip.fps, given=given)
+            reg.orient(options.priors.camera_height.centre(), clip.keypoints_px, "narrow", fps=clip.fps,
+                       given=given)  # the side the uncalibrated result reports
             raise NoCalibrationError(errors.get("narrow") or errors.get("wide"))
         chosen = max(logz, key=logz.get)
         choice = BranchChoice(chosen, "evidence" if len(logz) > 1 else "only",
@@ -366,6 +364,11 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     ({name: path}) are copied into the result folder (e.g. the keypoints a video run detected).
     """
     t0 = time.perf_counter()
+    # options that cannot work are refused before any work
+    if options.lens not in ("infer", "none"):
+        raise ValueError(f"lens must be 'infer' or 'none', got {options.lens!r}")
+    if options.branch not in (*BRANCHES, "auto"):
+        raise ValueError(f"branch must be auto, narrow or wide, got {options.branch!r}")
     inputs = [clip_dir, *protect]
     prepare_output(out_dir, inputs=inputs, overwrite=options.overwrite)  # before any work
     clip = load_clip(clip_dir, min_score=options.min_score)
@@ -383,8 +386,6 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     reg = register_clip(clip, progress=options.progress)
     t1 = time.perf_counter()
     log(f"lanes: {reg.status_counts()} ({t1 - t0:.1f} s)")
-    if options.lens not in ("infer", "none"):
-        raise ValueError(f"lens must be 'infer' or 'none', got {options.lens!r}")
     try:
         reg, side, lens, model, branch = _branch_models(clip, reg, options, given, log)
     except NoCalibrationError as exc:

@@ -52,3 +52,4 @@ def test_unknown_branch_is_a_clear_error(small_clip, tmp_path):
     with pytest.raises(ValueError, match="branch must be auto, narrow or wide"):
         run_clip(small_clip, tmp_path / "x", RunOptions(sampler=FAST, report=False, branch="sideways"),
                  log=lambda m: None)
+    assert not (tmp_path / "x").exists()  # refused before any work, nothing written
