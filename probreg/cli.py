@@ -115,7 +115,7 @@ def _run_options(args):
     priors = ModelPriors.from_options(height=args.height_m, height_sd=args.height_log_sd,
                                       stature=args.stature, stature_sd=args.stature_sd)
     sampler = SamplerSettings(n_walkers=args.walkers, max_steps=args.max_steps, n_draws=args.draws,
-                              seed=args.seed, moves=args.moves)
+                              seed=args.seed, moves=args.moves, draws_per_noise_copy=args.draws_per_noise_copy)
     from .calibration.lens import LensPrior
 
     return RunOptions(priors=priors, sampler=sampler, dist=_parse_dist(args.dist), min_score=args.min_score,
@@ -397,6 +397,9 @@ def _add_run_options(p):
     g.add_argument("--walkers", type=int, default=24)
     g.add_argument("--max-steps", type=int, default=8000, help="sampling budget (steps after burn-in)")
     g.add_argument("--draws", type=int, default=60, help="posterior draws propagated to angles")
+    g.add_argument("--draws-per-noise-copy", type=int, default=2,
+                   help="posterior draws that share one re-noised copy of the keypoints in the bootstrap "
+                        "(default 2; 1: a copy per draw, slower)")
     g.add_argument("--moves", choices=("de", "stretch"), default="de",
                    help="emcee moves: differential evolution (default; mixes faster) or the stretch move")
     g.add_argument("--dist", default=None, help="known lens distortion k1,k2,p1,p2,k3 (use --dist=...); "

@@ -37,6 +37,7 @@ def _defaults():
     p, smp, run = ModelPriors(), SamplerSettings(), RunOptions()
     return {"height_m": p.camera_height.median, "height_log_sd": p.camera_height.log_sd, "stature": p.stature.mean,
             "stature_sd": p.stature.sd, "walkers": smp.n_walkers, "max_steps": smp.max_steps, "draws": smp.n_draws,
+            "draws_per_noise_copy": smp.draws_per_noise_copy,
             "seed": smp.seed, "moves": smp.moves, "camera_side": run.camera_side, "branch": run.branch,
             "min_score": run.min_score, "lens": run.lens,
             "lens_k1_sd": run.lens_prior.sd}
@@ -56,6 +57,8 @@ CONFIG_KEYS = (
     Key("sampler", "walkers", "walkers", int, _D["walkers"], "emcee walkers"),
     Key("sampler", "max_steps", "max_steps", int, _D["max_steps"], "sampling budget (steps after burn-in)"),
     Key("sampler", "draws", "draws", int, _D["draws"], "posterior draws propagated to angles (the bands)"),
+    Key("sampler", "draws_per_noise_copy", "draws_per_noise_copy", int, _D["draws_per_noise_copy"],
+        "draws that share one re-noised copy of the keypoints in the bootstrap (1: a copy per draw)"),
     Key("sampler", "seed", "seed", int, _D["seed"], "random seed (results are reproducible for a seed)"),
     Key("sampler", "moves", "moves", str, _D["moves"],
         "emcee moves: 'de' (differential evolution, mixes faster on the correlated posterior) or 'stretch'"),

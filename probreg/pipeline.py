@@ -39,6 +39,7 @@ from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationErro
 from .inference.sampling import SamplerSettings
 from .inference.evidence import BRANCHES, BranchChoice, laplace_log_evidence
 from .inference.verdict import bone_length_cv, clip_verdict
+from .inference.parallel import fork_call
 from .io.clip import ClipFormatError, load_clip, write_json
 from .io.frames import has_frames
 from .io.output import atomic_output_dir, prepare_output
@@ -105,6 +106,26 @@ def _arviz():
         warnings.simplefilter("ignore", FutureWarning)  # ArviZ announces its 1.0 refactor on import
         import arviz as az
     return az
+
+
+def _warm_imports():
+    """Import the modules only the end of a run needs (xarray and h5netcdf for ``posterior.nc``,
+    matplotlib for the report, about 1 s) in a thread while the lanes are found; join it
+    before any process is forked (a fork while another thread holds an import lock could hang)."""
+    import threading
+
+    def work():
+        import importlib
+
+        for name in ("xarray", "h5netcdf", "matplotlib.pyplot"):
+            try:
+                importlib.import_module(name)
+            except Exception:  # noqa: BLE001 -- only a head start: the real import reports it
+                pass
+
+    thread = threading.Thread(target=work, name="probreg-imports", daemon=True)
+    thread.start()
+    return thread
 
 
 def posterior_inference_data(sampler, burn=0, keypoints_px=None, frame_lanes=None, names=PARAM_NAMES):
@@ -253,11 +274,7 @@ def _branch_candidate(clip, reg, options, given, branch):
 def _forked_evidence(clip, reg, options, given, branch):
     """Start the log evidence of ``branch`` in a forked process (the caller builds the other
     branch meanwhile: on two cores the second branch costs no wall time); returns a function
-    that waits for ``("ok", log_z)`` or ``("error", message)``.  Without ``fork`` (or with one
-    worker) the work is done when the result is asked for."""
-    import multiprocessing as mp
-
-    from .inference.propagation import _default_workers
+    that waits for ``("ok", log_z)`` or ``("error", message)`` (:func:`probreg.parallel.fork_call`)."""
 
     def work():
         try:
@@ -266,39 +283,7 @@ def _forked_evidence(clip, reg, options, given, branch):
         except NoCalibrationError as exc:
             return "error", str(exc)
 
-    if _default_workers() < 2 or "fork" not in mp.get_all_start_methods():
-        return work
-    ctx = mp.get_context("fork")
-    receive, send = ctx.Pipe(duplex=False)
-
-    def child():
-        from threadpoolctl import threadpool_limits
-
-        try:
-            with threadpool_limits(limits=1):
-                send.send(work())
-        except BaseException as exc:  # any failure must reach the parent, not hang it
-            send.send(("failed", f"{type(exc).__name__}: {exc}"))
-        finally:
-            send.close()
-
-    try:
-        proc = ctx.Process(target=child, daemon=True)
-        proc.start()
-    except (OSError, AssertionError):  # no processes allowed here (sandbox; a daemonic process's child)
-        send.close()
-        receive.close()
-        return work
-    send.close()
-
-    def result():
-        try:
-            out = receive.recv()
-        except EOFError:  # the process died (killed, out of memory): do it here
-            out = ("failed", "evidence process died")
-        proc.join()
-        return work() if out[0] == "failed" else out
-    return result
+    return fork_call(work)
 
 
 def _branch_models(clip, reg, options, given, log):
@@ -383,20 +368,31 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         raise ValueError(f"{clip_dir}: only {seen} frames have a detected athlete (at least 8 joints); "
                          f"the model needs at least 10")
     given = requested_side(options.camera_side, clip.meta, clip.path / "clip.json")
+    warm = _warm_imports()
     reg = register_clip(clip, progress=options.progress)
     t1 = time.perf_counter()
     log(f"lanes: {reg.status_counts()} ({t1 - t0:.1f} s)")
+    warm.join()  # before the branch evidence forks
     try:
         reg, side, lens, model, branch = _branch_models(clip, reg, options, given, log)
     except NoCalibrationError as exc:
         return _write_uncalibrated(clip, reg, reg.camera_side, out_dir, options, str(exc), t0, log, inputs,
                                    extra_files)
-    sampler, tau = model.sample(options.sampler, progress=options.progress)
+    smp = options.sampler
+    copies = None
+    if smp.bootstrap_noise:
+        # the bootstrap's re-noised keypoints do not depend on the posterior: made on the other
+        # core while the sampler runs on this one
+        n_copies = -(-smp.n_draws // smp.draws_per_noise_copy)
+        copies = fork_call(lambda: model.bootstrap_copies(np.random.default_rng([smp.seed, 1]), n_copies))
+    sampler, tau = model.sample(smp, progress=options.progress)
     chain = sampler.get_chain()  # (steps, walkers, D)
     flat = chain.reshape(-1, chain.shape[-1])
-    rng = np.random.default_rng(options.sampler.seed)
-    draws = flat[rng.choice(len(flat), min(options.sampler.n_draws, len(flat)), replace=False)]
-    prop = model.propagate(draws, rng, bootstrap_noise=options.sampler.bootstrap_noise, progress=options.progress)
+    rng = np.random.default_rng(smp.seed)
+    draws = flat[rng.choice(len(flat), min(smp.n_draws, len(flat)), replace=False)]
+    prop = model.propagate(draws, rng, bootstrap_noise=smp.bootstrap_noise, progress=options.progress,
+                           draws_per_noise_copy=smp.draws_per_noise_copy,
+                           noise_copies=None if copies is None else copies())
     joints, gait = prop["joints"], prop["gait"]
     decomposition = model.band_decomposition(draws, prop, rng)
     idata = posterior_inference_data(sampler, keypoints_px=clip.keypoints_px, frame_lanes=reg.frame_lanes,

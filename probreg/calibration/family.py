@@ -495,7 +495,20 @@ class SequenceCalibration:
         return len(self.families)
 
     def members_at_height(self, height_m):
-        """FamilyMember (or None where a frame has no family or no such member) per frame."""
+        """FamilyMember (or None where a frame has no family or no such member) per frame.
+
+        Remembered per height, branch and families (several steps of a registration ask for
+        the same height; the members are immutable)."""
+        key = (float(height_m), self.branch, tuple(map(id, self.families)))
+        cache = self.__dict__.setdefault("_members_cache", {})
+        if key not in cache:
+            if len(cache) >= 16:
+                cache.clear()
+            # the entry holds the families themselves, so their ids cannot be reused meanwhile
+            cache[key] = (tuple(self.families), self._solve_members(height_m))
+        return list(cache[key][1])
+
+    def _solve_members(self, height_m):
         out = []
         for fam in self.families:
             if fam is None:

@@ -64,7 +64,8 @@ from ..lifting import LiftConfig
 from ..lifting.trajectory import _runs, fit_ground_track
 from .bands import stance_window
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
-from .propagation import DrawPropagation, _default_workers, _fork_map
+from .parallel import default_workers, fork_map
+from .propagation import DrawPropagation
 from .sampling import EmceeSampling, SamplerSettings
 
 __all__ = ["ClipModel", "SamplerSettings", "PARAM_NAMES", "STILLNESS_SYS_SD", "NoCalibrationError"]
@@ -211,8 +212,8 @@ class ClipModel(DrawPropagation, EmceeSampling):
         frames = [i for i, fam in enumerate(fams) if fam is not None]
         if self.dist is not None and np.any(self.dist):
             # every member undistorts the frame's lines anew (~1 ms each): frames go to the cores
-            k = max(1, min(_default_workers(), len(frames)))
-            parts = _fork_map(lambda idx: {i: self._members(i, fams[i], fgrid) for i in idx},
+            k = max(1, min(default_workers(), len(frames)))
+            parts = fork_map(lambda idx: {i: self._members(i, fams[i], fgrid) for i in idx},
                               [frames[j::k] for j in range(k)])
             members = {i: m for part in parts for i, m in part.items()}
         else:

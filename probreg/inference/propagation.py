@@ -12,6 +12,7 @@ from ..analysis import gait_summary
 from ..filtering import clean_keypoints, score_noise_scale
 from ..geometry import ANGLE_NAMES, JOINT_INDEX, CameraArrays
 from ..lifting import LiftConfig, fit_ground_track, lift
+from .parallel import default_workers, fork_map
 
 __all__ = ["DrawPropagation"]
 
@@ -24,7 +25,7 @@ class DrawPropagation:
     (``noise_sd``, ``noise_rho``), ``contacts``, ``stride_lag``, ``gap_distance`` and ``timings``."""
 
     def propagate(self, draws, rng, bootstrap_noise=True, config: LiftConfig = LiftConfig(), workers=None,
-                  progress=None):
+                  progress=None, draws_per_noise_copy=2, noise_copies=None):
         """Lift the clip for every draw.
 
         Each draw is lifted twice: from the cleaned keypoints (the draw's *point*
@@ -34,7 +35,17 @@ class DrawPropagation:
         smooth the hip, knee and elbow angles across strides as :func:`lift` does for
         noisy clips (with the clip's stride timing, found once).
 
-        Every draw has its own random stream (spawned from ``rng``), so the result
+        The re-noised keypoints do not depend on the draw: ``draws_per_noise_copy`` draws share
+        one noise copy (and its cleaning, the costly part of a bootstrap), draw ``s`` copy
+        ``s mod K`` with ``K = ceil(S / draws_per_noise_copy)``; each draw is still lifted with
+        its own camera and limbs (on ``run_a``, sharing by 2 moved the knee bands' mean width
+        by less than their Monte Carlo noise, ``reports/bench_speed.md``; 1 gives every draw
+        its own copy).
+
+        ``noise_copies`` (a list from :meth:`bootstrap_copies`, made ahead, e.g. while the
+        sampler runs) replaces the copies: draw ``s`` takes ``noise_copies[s mod len]``.
+
+        Every draw and every noise copy has its own random stream (spawned from ``rng``), so the result
         does not depend on ``workers``: draws are shared out over that many forked
         processes (default: the machine's cores, at most 4; 1, or a platform without
         ``fork``, runs them here).  ``progress(desc, total)``, when given, makes a progress bar
@@ -49,7 +60,8 @@ class DrawPropagation:
         """
         t0 = time.perf_counter()
         with_noise = bootstrap_noise and np.isfinite(self.noise_sd) and self.noise_sd > 0
-        out = self._lift_draws(draws, rng, with_noise, config, workers, progress)
+        out = self._lift_draws(draws, rng, with_noise, config, workers, progress, draws_per_noise_copy,
+                               noise_copies)
         self.timings["propagation_s"] = time.perf_counter() - t0
         return out
 
@@ -106,21 +118,38 @@ class DrawPropagation:
         self.timings["decomposition_s"] = time.perf_counter() - t0
         return out
 
-    def _lift_draws(self, draws, rng, with_noise, config, workers, progress):
+    def bootstrap_copies(self, rng, n):
+        """``n`` re-noised copies of the cleaned keypoints, each cleaned again as the data were
+        (the draw-independent half of the bootstrap), from ``rng``'s spawned streams."""
+        per_joint = self._joint_noise_scale()
+        seeds = rng.integers(0, 2**63 - 1, size=int(n))
+        return [self._noise_copy(np.random.default_rng(int(sd)), per_joint) for sd in seeds]
+
+    def _lift_draws(self, draws, rng, with_noise, config, workers, progress, draws_per_noise_copy=1,
+                    noise_copies=None):
         S = len(draws)
+        if int(draws_per_noise_copy) < 1:
+            raise ValueError(f"draws_per_noise_copy must be at least 1, got {draws_per_noise_copy}")
+        if noise_copies is not None and len(noise_copies) == 0:
+            raise ValueError("noise_copies is empty")
         cross = config.cross_stride_angles
         cross = self.stride_lag is not None if cross == "auto" else bool(cross)
         cfg = LiftConfig(**{**config.__dict__, "smooth_cutoff_hz": None, "cross_stride_angles": cross})
         L = self.lengths(draws)
         seeds = rng.integers(0, 2**63 - 1, size=S)
-        job = (draws, L, seeds, cfg, with_noise, self._joint_noise_scale() if with_noise else None)
-        workers = max(1, min(_default_workers() if workers is None else int(workers), S))
-        # a few chunks per worker: the progress bar moves, and a slow chunk does not hold the rest
-        n_chunks = min(S, workers * 4) if workers > 1 or progress is not None else 1
-        chunks = [list(range(S))[k::n_chunks] for k in range(n_chunks)]
+        K = -(-S // int(draws_per_noise_copy)) if noise_copies is None else len(noise_copies)
+        # noise copies, draw s uses copy s % K: given, or made by the workers from these seeds
+        noise = noise_copies if noise_copies is not None else (
+            rng.integers(0, 2**63 - 1, size=K) if with_noise else None)
+        job = (draws, L, seeds, noise, cfg, with_noise, self._joint_noise_scale() if with_noise else None)
+        workers = max(1, min(default_workers() if workers is None else int(workers), S))
+        # a few chunks per worker: the progress bar moves, and a slow chunk does not hold the rest;
+        # the draws that share a noise copy go in one chunk (the copy is cleaned once)
+        n_chunks = min(K, workers * 4) if workers > 1 or progress is not None else 1
+        chunks = [[s for s in range(S) if (s % K) % n_chunks == c] for c in range(n_chunks)]
         bar = progress("propagation", S) if progress is not None else None
         try:
-            parts = _fork_map(lambda idx: self._propagate_draws(idx, *job), chunks, workers,
+            parts = fork_map(lambda idx: self._propagate_draws(idx, *job), chunks, workers,
                               done=None if bar is None else (lambda chunk: bar.update(len(chunk))))
         finally:
             if bar is not None:
@@ -142,9 +171,10 @@ class DrawPropagation:
                         out[key].setdefault(k, np.full(S, np.nan))[s] = v
         return out
 
-    def _propagate_draws(self, indices, draws, L, seeds, cfg, with_noise, per_joint):
+    def _propagate_draws(self, indices, draws, L, seeds, noise, cfg, with_noise, per_joint):
         """The liftings of some draws: {draw index: {joints, joints_point, angles, angles_point, gait}}."""
         out = {}
+        copies = {}  # noise copy index -> cleaned re-noised keypoints
         for s in indices:
             rng = np.random.default_rng(int(seeds[s]))
             h = float(np.exp(draws[s, 0]))
@@ -156,10 +186,11 @@ class DrawPropagation:
             seg = {k: float(v[s]) for k, v in L.items()}
             variants = [("_point", self.kp)]
             if with_noise:
-                noisy = self.kp.copy()
-                noisy[..., :2] += (_ar1_noise(rng, self.kp.shape[:2] + (2,), self.noise_sd, self.noise_rho)
-                                   * per_joint[..., None])
-                variants.append(("", clean_keypoints(noisy, self.fps)))
+                k = s % len(noise)
+                if k not in copies:
+                    copies[k] = (noise[k] if isinstance(noise, list)
+                                 else self._noise_copy(np.random.default_rng(int(noise[k])), per_joint))
+                variants.append(("", copies[k]))
             res_s = {}
             for suffix, kp in variants:
                 # the same contacts for every draw (detected once on the cleaned keypoints)
@@ -179,6 +210,13 @@ class DrawPropagation:
                 res_s["gait"] = res_s["gait_point"]
             out[s] = res_s
         return out
+
+    def _noise_copy(self, rng, per_joint):
+        """The cleaned keypoints plus re-simulated detector noise, cleaned again as the data were."""
+        noisy = self.kp.copy()
+        noisy[..., :2] += (_ar1_noise(rng, self.kp.shape[:2] + (2,), self.noise_sd, self.noise_rho)
+                           * per_joint[..., None])
+        return clean_keypoints(noisy, self.fps)
 
     def _jitter_bridged(self, cams, rng, deg_per_frame=0.01, zoom_per_frame=0.002):
         """Uncertainty of bridged frames (no lanes): random pan/tilt and zoom growing with the
@@ -218,59 +256,6 @@ class DrawPropagation:
                 unit = rel / np.sqrt(np.nanmean(rel**2, axis=0))[None]
             out = out * np.where(np.isfinite(unit), unit, 1.0)
         return out
-
-
-#: the function forked workers run on their chunk (set only while a pool runs)
-_FORKED = None
-
-def _default_workers():
-    """Processes for the per-frame and per-draw work: ``PROBREG_WORKERS`` when set (``probreg batch``
-    sets 1: each of its workers is one core), else the machine's cores, at most 4."""
-    import os
-
-    env = os.environ.get("PROBREG_WORKERS", "").strip()
-    if env.isdigit() and int(env) > 0:
-        return int(env)
-    return min(os.cpu_count() or 1, 4)
-
-
-def _forked_chunk(indices):
-    from threadpoolctl import threadpool_limits
-
-    # the workers already use every core: BLAS threads inside them only compete (4x slower)
-    with threadpool_limits(limits=1):
-        return _FORKED(indices)
-
-
-def _fork_map(func, chunks, workers=None, done=None):
-    """``[func(chunk) for chunk in chunks]``, on ``workers`` forked processes (default: one per
-    chunk) when there are several and the platform forks (the workers inherit ``func`` and its
-    data; only the chunks and the results are pickled), else here, as also when processes are
-    not allowed.  ``done(chunk)`` is called as each chunk finishes."""
-    import multiprocessing as mp
-
-    global _FORKED
-    workers = len(chunks) if workers is None else min(int(workers), len(chunks))
-    if workers > 1 and "fork" in mp.get_all_start_methods():
-        _FORKED = func
-        try:
-            with mp.get_context("fork").Pool(workers) as pool:
-                out = []
-                for chunk, res in zip(chunks, pool.imap(_forked_chunk, chunks)):
-                    out.append(res)
-                    if done is not None:
-                        done(chunk)
-                return out
-        except OSError:  # no processes allowed here (sandbox, limits)
-            pass
-        finally:
-            _FORKED = None
-    out = []
-    for c in chunks:
-        out.append(func(c))
-        if done is not None:
-            done(c)
-    return out
 
 
 def _ar1_noise(rng, shape, sd, rho):

@@ -30,7 +30,9 @@ class SamplerSettings:
 
     ``moves``: ``"de"`` (differential evolution, the default) or ``"stretch"`` (emcee's
     default move).  The chain stops when it is ``tau_multiple`` integrated autocorrelation
-    times long (checked every ``chunk`` steps) or after ``max_steps``."""
+    times long (checked every ``chunk`` steps) or after ``max_steps``.  ``n_draws`` posterior
+    draws are propagated; ``draws_per_noise_copy`` of them share one re-noised copy of the
+    keypoints in the bootstrap (:meth:`probreg.inference.ClipModel.propagate`)."""
 
     n_walkers: int = 24
     tau_multiple: float = 50.0
@@ -39,10 +41,13 @@ class SamplerSettings:
     burn_in: int = 200
     n_draws: int = 60
     bootstrap_noise: bool = True
+    draws_per_noise_copy: int = 2
     seed: int = 0
     moves: str = "de"
 
     def __post_init__(self):
+        if int(self.draws_per_noise_copy) < 1:
+            raise ValueError(f"draws_per_noise_copy must be at least 1, got {self.draws_per_noise_copy}")
         if self.moves not in MOVES:
             raise ValueError(f"moves must be one of {', '.join(MOVES)}, got {self.moves!r}")
 

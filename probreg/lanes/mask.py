@@ -58,10 +58,20 @@ def _near_capsules(points, capsules, reach):
     """(N,) bool: points within ``radius + reach`` of any capsule (S, 5)."""
     if capsules is None or len(capsules) == 0 or len(points) == 0:
         return np.zeros(len(points), bool)
+    out = np.zeros(len(points), bool)
+    # only points inside the capsules' common bounding box can be near one (most are far away)
+    grow = float(np.max(capsules[:, 4])) + reach
+    lo = np.minimum(capsules[:, :2], capsules[:, 2:4]).min(axis=0) - grow
+    hi = np.maximum(capsules[:, :2], capsules[:, 2:4]).max(axis=0) + grow
+    inside = np.flatnonzero(np.all((points >= lo) & (points <= hi), axis=1))
+    if len(inside) == 0:
+        return out
+    points = points[inside]
     a, b, r = capsules[:, :2], capsules[:, 2:4], capsules[:, 4]
     ab = b - a
     L2 = np.maximum(np.sum(ab * ab, axis=1), 1e-12)
     ap = points[:, None, :] - a[None]
     t = np.clip(np.sum(ap * ab[None], axis=-1) / L2, 0.0, 1.0)
     d2 = np.sum((ap - t[..., None] * ab[None]) ** 2, axis=-1)
-    return np.any(d2 < (r + reach)[None] ** 2, axis=1)
+    out[inside] = np.any(d2 < (r + reach)[None] ** 2, axis=1)
+    return out

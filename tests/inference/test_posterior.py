@@ -246,6 +246,26 @@ def test_propagation_does_not_depend_on_the_number_of_workers(model, monkeypatch
     assert not np.allclose(one["joints"], one["joints_point"], equal_nan=True)
 
 
+def test_draws_share_noise_copies_as_asked_and_workers_do_not_matter(model):
+    """``draws_per_noise_copy``: identical draws that share a re-noised copy lift identically,
+    with a copy each they differ; sharing does not make the result depend on the workers."""
+    m, gt = model
+    h = gt.cameras[0].C[2]
+    same = np.tile(np.r_[np.log(h), gt.athlete["stature_m"], np.ones(len(PARAM_NAMES) - 2)], (4, 1))
+    assert not np.any(m.gap_distance > 0)  # no bridged frames: no per-draw camera jitter here
+    shared = m.propagate(same, np.random.default_rng(5), workers=1, draws_per_noise_copy=2)
+    # draws 0 and 2 share copy 0, draws 1 and 3 copy 1 (draw s takes copy s mod 2)
+    assert np.array_equal(shared["joints"][0], shared["joints"][2], equal_nan=True)
+    assert np.array_equal(shared["joints"][1], shared["joints"][3], equal_nan=True)
+    assert not np.allclose(shared["joints"][0], shared["joints"][1], equal_nan=True)
+    own = m.propagate(same, np.random.default_rng(5), workers=1, draws_per_noise_copy=1)
+    assert not np.allclose(own["joints"][0], own["joints"][2], equal_nan=True)
+    two = m.propagate(same, np.random.default_rng(5), workers=2, draws_per_noise_copy=2)
+    assert np.array_equal(shared["joints"], two["joints"], equal_nan=True)
+    with pytest.raises(ValueError, match="draws_per_noise_copy"):
+        m.propagate(same, np.random.default_rng(5), workers=1, draws_per_noise_copy=0)
+
+
 def test_frame_status_says_how_each_camera_came_about():
     from probreg.lanes import FrameLanes
     from probreg.pipeline import _frame_status

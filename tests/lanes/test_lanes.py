@@ -405,3 +405,22 @@ def test_a_degenerate_pencil_is_not_a_crash():
 
     assert np.isnan(_spacing_residual_px((), [0.1, np.inf, 0.3, 0.4], [0, 1, 2, 3], np.array([1.0, 0, 0]),
                                          (1920, 1080)))
+
+
+def test_points_near_capsules_agree_with_the_distance_to_every_segment():
+    """The bounding-box shortcut of ``_near_capsules`` keeps exactly the points within reach of a
+    capsule (checked against the plain point-to-segment distance, NaN points never near)."""
+    from probreg.lanes.mask import _near_capsules
+
+    rng = np.random.default_rng(3)
+    caps = np.column_stack([rng.uniform(400, 600, (12, 4)), rng.uniform(5, 20, 12)])
+    pts = np.vstack([rng.uniform(0, 1000, (4000, 2)), [[np.nan, 500.0]]])
+    reach = 3.0
+    a, b = caps[:, :2], caps[:, 2:4]
+    t = np.clip(np.einsum("nsk,sk->ns", pts[:, None] - a, b - a) / np.sum((b - a) ** 2, 1), 0, 1)
+    dist = np.linalg.norm(pts[:, None] - (a + t[..., None] * (b - a)), axis=-1)
+    want = np.any(dist < caps[:, 4] + reach, axis=1)
+    got = _near_capsules(pts, caps, reach)
+    assert 50 < want.sum() < 3900  # points on both sides of the question
+    assert np.array_equal(got, want)
+    assert not got[-1]

@@ -1,0 +1,131 @@
+"""Work on forked processes: a map over chunks and a single call in the background.
+
+Both fall back to running here when the platform cannot fork, when only one worker is wanted
+(``PROBREG_WORKERS=1``, as ``probreg batch`` sets for its single-core workers) or when no process
+may be started (a sandbox, a daemonic process); the results are the same either way.  Forked
+processes inherit the caller's data, so only arguments and results are pickled, and they run
+with one BLAS thread each (they already use every core).
+"""
+
+from __future__ import annotations
+
+import os
+
+__all__ = ["default_workers", "fork_map", "fork_call"]
+
+#: the function forked workers run on their chunk (set only while a pool runs)
+_FORKED = None
+
+
+def default_workers():
+    """Processes for the per-frame and per-draw work: ``PROBREG_WORKERS`` when set, else the
+    machine's cores, at most 4."""
+    env = os.environ.get("PROBREG_WORKERS", "").strip()
+    if env.isdigit() and int(env) > 0:
+        return int(env)
+    return min(os.cpu_count() or 1, 4)
+
+
+def _can_fork():
+    import multiprocessing as mp
+
+    return "fork" in mp.get_all_start_methods()
+
+
+def _forked_chunk(indices):
+    from threadpoolctl import threadpool_limits
+
+    # the workers already use every core: BLAS threads inside them only compete (4x slower)
+    with threadpool_limits(limits=1):
+        return _FORKED(indices)
+
+
+def fork_map(func, chunks, workers=None, done=None):
+    """``[func(chunk) for chunk in chunks]``, on ``workers`` forked processes (default: one per
+    chunk) when there are several and the platform forks, else here.  ``done(chunk)`` is called
+    as each chunk finishes.
+
+    >>> fork_map(sum, [[1, 2], [3], []], workers=1)
+    [3, 3, 0]
+    """
+    import multiprocessing as mp
+
+    global _FORKED
+    workers = len(chunks) if workers is None else min(int(workers), len(chunks))
+    if workers > 1 and _can_fork():
+        _FORKED = func
+        try:
+            with mp.get_context("fork").Pool(workers) as pool:
+                out = []
+                for chunk, res in zip(chunks, pool.imap(_forked_chunk, chunks)):
+                    out.append(res)
+                    if done is not None:
+                        done(chunk)
+                return out
+        except OSError:  # no processes allowed here (sandbox, limits)
+            pass
+        finally:
+            _FORKED = None
+    out = []
+    for c in chunks:
+        out.append(func(c))
+        if done is not None:
+            done(c)
+    return out
+
+
+def fork_call(work):
+    """Start ``work()`` in a forked process and return a function that waits for its result.
+
+    Meant for work that can overlap the caller's own (on two cores it then costs no wall
+    time).  With one worker, without ``fork`` or where no process may be started, ``work``
+    runs when the result is asked for; if the process fails or dies, ``work`` runs again
+    here, so its own exceptions reach the caller as they would without a process.  Fork only
+    while no other thread of this process is importing or holding locks.
+
+    >>> result = fork_call(lambda: 6 * 7)
+    >>> result()
+    42
+    """
+    import multiprocessing as mp
+
+    if default_workers() < 2 or not _can_fork():
+        return work
+    ctx = mp.get_context("fork")
+    receive, send = ctx.Pipe(duplex=False)
+
+    def child():
+        from threadpoolctl import threadpool_limits
+
+        try:
+            with threadpool_limits(limits=1):
+                out = ("ok", work())
+        except BaseException as exc:  # any failure must reach the parent, not hang it
+            out = ("failed", f"{type(exc).__name__}: {exc}")
+        try:
+            send.send(out)
+        except Exception as exc:  # noqa: BLE001 -- e.g. an unpicklable result
+            send.send(("failed", f"{type(exc).__name__}: {exc}"))
+        finally:
+            send.close()
+
+    try:
+        proc = ctx.Process(target=child, daemon=True)
+        proc.start()
+    except (OSError, AssertionError):  # no processes allowed here (sandbox; a daemonic process's child)
+        send.close()
+        receive.close()
+        return work
+    send.close()
+
+    def result():
+        try:
+            status, value = receive.recv()
+        except EOFError:  # the process died (killed, out of memory)
+            status, value = "failed", "process died"
+        finally:
+            receive.close()
+        proc.join()
+        return value if status == "ok" else work()
+
+    return result

@@ -1,0 +1,43 @@
+"""Forked work: results equal running here, failures reach the caller as themselves."""
+
+import os
+
+import numpy as np
+import pytest
+
+from probreg.inference.parallel import default_workers, fork_call, fork_map
+
+
+def test_fork_call_returns_the_child_result_computed_from_inherited_data(monkeypatch):
+    monkeypatch.setenv("PROBREG_WORKERS", "2")
+    data = np.arange(10.0)
+    result = fork_call(lambda: (os.getpid(), float(data.sum())))
+    pid, total = result()
+    assert total == 45.0
+    assert pid != os.getpid()  # computed in another process
+
+
+def test_fork_call_failure_is_raised_here_as_itself(monkeypatch):
+    monkeypatch.setenv("PROBREG_WORKERS", "2")
+
+    def work():
+        raise KeyError("no such thing")
+
+    result = fork_call(work)
+    with pytest.raises(KeyError, match="no such thing"):
+        result()
+
+
+def test_one_worker_runs_the_work_here_when_asked(monkeypatch):
+    monkeypatch.setenv("PROBREG_WORKERS", "1")
+    assert default_workers() == 1
+    result = fork_call(lambda: os.getpid())
+    assert result() == os.getpid()
+
+
+def test_fork_map_keeps_the_order_of_the_chunks(monkeypatch):
+    chunks = [[1, 2], [3], [], [4, 5, 6]]
+    assert fork_map(sum, chunks, workers=2) == [3, 3, 0, 15]
+    done = []
+    fork_map(sum, chunks, workers=1, done=done.append)
+    assert done == chunks
