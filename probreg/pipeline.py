@@ -390,9 +390,12 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     flat = chain.reshape(-1, chain.shape[-1])
     rng = np.random.default_rng(smp.seed)
     draws = flat[rng.choice(len(flat), min(smp.n_draws, len(flat)), replace=False)]
+    if copies is not None:
+        t_wait = time.perf_counter()
+        copies = copies()
+        model.timings["noise_copies_wait_s"] = time.perf_counter() - t_wait
     prop = model.propagate(draws, rng, bootstrap_noise=smp.bootstrap_noise, progress=options.progress,
-                           draws_per_noise_copy=smp.draws_per_noise_copy,
-                           noise_copies=None if copies is None else copies())
+                           draws_per_noise_copy=smp.draws_per_noise_copy, noise_copies=copies)
     joints, gait = prop["joints"], prop["gait"]
     decomposition = model.band_decomposition(draws, prop, rng)
     idata = posterior_inference_data(sampler, keypoints_px=clip.keypoints_px, frame_lanes=reg.frame_lanes,

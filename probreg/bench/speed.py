@@ -11,6 +11,11 @@ in a fresh process, twice (the best wall time counts; both are listed).  The bre
   (emcee) and propagation (re-lifting every kept draw), from ``run.json``;
 * the rest: writing the result files, ``posterior.nc`` and the report.
 
+The bootstrap's re-noised keypoints are shared by two draws (``--draws-per-noise-copy 2``, the
+default): the clip also runs with a copy per draw (``1``, as before), at two seeds each, and the
+mean widths of the knee, hip and elbow bands of ``angles.csv`` are compared (the seeds' spread is
+the Monte Carlo noise the change must stay within).
+
 Then how many posterior draws the bands need: the knee bands of the run's 60 draws recomputed
 from subsets of 15, 30 and 45 draws (the draws' own joints from ``joints3d.npz``), with their
 mean width and how far their edges move from the 60-draw band.
@@ -72,6 +77,38 @@ def _band_stability(result):
     return rows
 
 
+def _band_widths(result):
+    """Mean 90 % band width (deg) of each angle family in ``angles.csv`` (knee, hip, elbow)."""
+    import csv
+
+    widths = {}
+    with open(result / "angles.csv", newline="") as fh:
+        for row in csv.DictReader(fh):
+            fam = row["angle"].split("_")[0]
+            if fam in ("knee", "hip", "elbow"):
+                w = float(row["hi_deg"]) - float(row["lo_deg"])
+                if np.isfinite(w):
+                    widths.setdefault(fam, []).append(w)
+    return {k: float(np.mean(v)) for k, v in widths.items()}
+
+
+def _sharing_table(py, clip, tmp, shared_out, shared_wall):
+    """Runs with a noise copy per draw and shared by two, two seeds each: wall time and widths."""
+    runs = [("2 (default)", 0, shared_out, shared_wall)]
+    for k, seed in (("2 (default)", 1), ("1", 0), ("1", 1)):
+        out = Path(tmp) / f"share{k[0]}_{seed}"
+        w, _ = _wall([py, "-m", "probreg", "run", str(clip), "--out", str(out), "--seed", str(seed), "--quiet",
+                      "--draws-per-noise-copy", k[0]])
+        runs.append((k, seed, out, w))
+    rows = []
+    for k, seed, out, w in runs:
+        b = _band_widths(out)
+        t = json.loads((out / "run.json").read_text())["timings_s"]
+        rows.append([k, seed, w, t["propagation_s"], b.get("knee"), b.get("hip"), b.get("elbow")])
+    return md_table(["draws per noise copy", "seed", "CLI wall s", "propagation s", "knee band deg",
+                     "hip band deg", "elbow band deg"], rows)
+
+
 def run(args=None):
     rep = BenchReport("speed", "Where the time of `probreg run` goes (CLI wall time, decode and start-up included)")
     rep.add(__doc__.split("\n\n", 1)[1])
@@ -127,6 +164,8 @@ def run(args=None):
              "yes" if 1000 * timings["lanes_s"] / F <= 15 else "**no**"],
             ["`probreg --help` imports no matplotlib/arviz", "none", "numpy and probreg.geometry only "
              "(checked by tests/architecture)", "yes"]]))
+        rep.add("## Sharing the bootstrap's noise copies: time and band widths\n")
+        rep.add(_sharing_table(py, clip, tmp, best_out, best))
         rep.add("## How many draws the bands need\n")
         rep.add("Knee bands (5-95 % of the draws, both knees, every frame) from random subsets of the run's "
                 "draws (20 subsets each): mean width, and the mean shift of the band edges from those of all "

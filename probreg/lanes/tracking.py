@@ -61,9 +61,10 @@ def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypo
             # copy): predicts where the lines went when the camera pans or shakes
             scale = 320.0 / img.shape[1]
             step = max(1, img.shape[1] // 640)  # cheap pre-decimation; phase correlation is coarse anyway
-            small = cv2.cvtColor(cv2.resize(img[::step, ::step], (320, max(8, int(round(img.shape[0] * scale)))),
-                                            interpolation=cv2.INTER_AREA),
-                                 cv2.COLOR_BGR2GRAY).astype(np.float32)
+            # grey first: the strided copy of one channel is a third of the colour one's
+            small = cv2.resize(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)[::step, ::step],
+                               (320, max(8, int(round(img.shape[0] * scale)))),
+                               interpolation=cv2.INTER_AREA).astype(np.float32)
             if prev_small is not None and prev_small.shape == small.shape:
                 if window is None or window.shape != small.shape:
                     window = cv2.createHanningWindow(small.shape[::-1], cv2.CV_32F)
