@@ -205,6 +205,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self.R = np.full((self.F, n, 3, 3), np.nan)
         self.pp = np.tile([(self.reg.image_size[0] - 1) / 2, (self.reg.image_size[1] - 1) / 2], (self.F, 1))
         self.flip = np.zeros(self.F, bool)
+        self.fold_heights = np.full(self.F, np.nan)  # each frame's highest member (the fold)
         lo, hi = np.inf, -np.inf
         from ..geometry import focal_from_fov
 
@@ -227,6 +228,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
                 continue
             hh = np.where(ok, m["height_m"], np.nan)
             k = int(np.nanargmax(hh))
+            self.fold_heights[i] = hh[k]
             sl = slice(k, n) if self.branch == "narrow" else slice(0, k + 1)
             self.logf[i, sl] = np.log(fgrid[sl])
             self.h[i, sl] = hh[sl]

@@ -388,3 +388,13 @@ def test_planted_feet_slide_at_wrong_camera_heights(tmp_path):
     assert abs(crossing) < np.log(1.1)
     assert np.interp(np.log(0.85), lg[ok], slide) > 0.2 and np.interp(np.log(1.15), lg[ok], slide) < -0.2
     assert abs(lg[np.argmax(model.ll_still)]) < np.log(1.1)
+
+
+def test_every_frame_reaches_the_true_camera_below_its_fold(model):
+    """The true camera is a member of every calibrated frame's family, so no frame's highest
+    member (its fold, the verdict's "lanes' limit") lies below the true height."""
+    m, gt = model
+    fold = m.fold_heights[m.valid]
+    assert len(fold) > 0 and np.all(np.isfinite(fold))
+    assert np.all(fold >= 0.99 * gt.cameras[0].C[2])
+    assert np.all(np.isnan(m.fold_heights[~m.valid_lanes]))
