@@ -117,7 +117,7 @@ def _warm_imports():
     def work():
         import importlib
 
-        for name in ("xarray", "h5netcdf", "matplotlib.pyplot"):
+        for name in ("xarray", "h5netcdf", "matplotlib.figure", "matplotlib.backends.backend_agg"):
             try:
                 importlib.import_module(name)
             except Exception:  # noqa: BLE001 -- only a head start: the real import reports it
