@@ -594,6 +594,8 @@ def build_parser():
                    help="'bench validation': the shared validation clips, the held-out set, or both")
     b.add_argument("--heldout-dir", type=Path, default=None,
                    help="'bench validation': reuse (or write) the held-out clips there")
+    b.add_argument("--keep-outputs", type=Path, default=None,
+                   help="'bench validation': keep every run's result folder there (DIR/<clip>)")
     b.set_defaults(func=_cmd_bench)
     return p
 

@@ -241,18 +241,29 @@ def run(args=None):
             sets.append(("held-out set (probreg's generator, 40 randomised set-ups, seeds fixed before tuning; "
                          "100 frames each; no peer numbers)", {},
                          _heldout_clips(getattr(args, "heldout_dir", None) or scratch)))
-        _run_sets(rep, sets, only)
+        _run_sets(rep, sets, only, getattr(args, "keep_outputs", None))
     return rep
 
 
-def _run_sets(rep, sets, only):
+def _run_sets(rep, sets, only, keep=None):
+    """Run and score every set; ``keep``: a folder that receives every run's result folder
+    (``keep/<clip>``; none of them may exist yet: an old result would be scored as new), else
+    they go to a temporary folder."""
     for title, peer, clips in sets:
         if only:
             clips = [c for c in clips if c.name in set(only.split(","))]
         if not clips:
             continue
-        with tempfile.TemporaryDirectory() as tmp:
-            rows, scores = _score_set(clips, peer, tmp)
+        if keep is not None:
+            there = [c.name for c in clips if (Path(keep) / c.name).exists()]
+            if there:
+                raise ValueError(f"{keep}: result folders already there ({', '.join(there[:3])}"
+                                 f"{', ...' if len(there) > 3 else ''}); give an empty or new folder")
+            Path(keep).mkdir(parents=True, exist_ok=True)
+            rows, scores = _score_set(clips, peer, keep)
+        else:
+            with tempfile.TemporaryDirectory() as tmp:
+                rows, scores = _score_set(clips, peer, tmp)
         summary = _summary(scores, peer)
         rep.numbers[title] = summary
         rep.add(f"## {title[0].upper() + title[1:]}: per clip\n")
