@@ -428,7 +428,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         log_height_prior_sd=getattr(prior_h, "log_sd", None), side=side, bone_cv_pct=bone_length_cv(joints_med),
         speed_mps=gait_s.get("speed_mps", {}).get("median"),
         stature_draws=flat[:, 1], stature_prior=options.priors.stature, branch=branch,
-        fold_heights=model.fold_heights[model.valid])
+        member_sensitivity=model.member_sensitivity(height["median"]))
     with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=inputs, log=log) as tmp:
         _copy_extra(tmp, extra_files)
         write_angles_csv(tmp / "angles.csv", clip.fps, {k: v[0] for k, v in summ.items()},

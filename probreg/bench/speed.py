@@ -141,10 +141,16 @@ def run(args=None):
         if "branch_s" in timings:  # it holds the chosen model's precompute (listed above)
             stages.append(("lens inference and the family branch (both branches' evidence)",
                            timings["branch_s"] - timings["precompute_s"]))
+        if "noise_copies_wait_s" in timings:
+            stages.append(("waiting for the bootstrap's noise copies (made while the sampler runs)",
+                           timings["noise_copies_wait_s"]))
         if "decomposition_s" in timings:
             stages.append(("band decomposition", timings["decomposition_s"]))
-        known = sum(v for _, v in stages)
-        stages.append(("imports of the run, writing, posterior.nc, report (the rest)", best - known))
+        in_run = sum(v for n, v in stages if not n.startswith("start-up"))
+        stages.append(("other work inside the run (summaries, inference data, verdict)",
+                       timings["total_s"] - in_run))
+        stages.append(("imports of the run, writing the files, posterior.nc and the report (the rest)",
+                       best - timings["total_s"] - t_help))
         rep.add(f"Clip: `{clip.name}`, {F} frames, {meta['image_size'][0]}x{meta['image_size'][1]}, "
                 f"{meta['fps']:g} fps. Wall times of the two runs: {', '.join(f'{w:.1f} s' for w in walls)}; "
                 f"exit {code}.\n")

@@ -205,7 +205,6 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self.R = np.full((self.F, n, 3, 3), np.nan)
         self.pp = np.tile([(self.reg.image_size[0] - 1) / 2, (self.reg.image_size[1] - 1) / 2], (self.F, 1))
         self.flip = np.zeros(self.F, bool)
-        self.fold_heights = np.full(self.F, np.nan)  # each frame's highest member (the fold)
         lo, hi = np.inf, -np.inf
         from ..geometry import focal_from_fov
 
@@ -228,7 +227,6 @@ class ClipModel(DrawPropagation, EmceeSampling):
                 continue
             hh = np.where(ok, m["height_m"], np.nan)
             k = int(np.nanargmax(hh))
-            self.fold_heights[i] = hh[k]
             sl = slice(k, n) if self.branch == "narrow" else slice(0, k + 1)
             self.logf[i, sl] = np.log(fgrid[sl])
             self.h[i, sl] = hh[sl]
@@ -288,6 +286,19 @@ class ClipModel(DrawPropagation, EmceeSampling):
         with np.errstate(invalid="ignore"):
             lf = self.logf[rows, ia] + t * (self.logf[rows, ib] - self.logf[rows, ia])
         return np.where(ok, np.exp(lf), np.nan)
+
+    def member_sensitivity(self, height_m, rel=0.01):
+        """How weakly the height fixes the camera: the median over calibrated frames of
+        ``|d log f / d log h|`` at ``height_m`` (central difference over +-``rel``), about 1 for a
+        broadcast camera, growing without bound towards the top of the family (a frame that
+        loses its member within the step counts as infinite); NaN without calibrated frames."""
+        up, down = self._focal_at(height_m * (1 + rel)), self._focal_at(height_m / (1 + rel))
+        with np.errstate(invalid="ignore", divide="ignore"):
+            s = np.abs(np.log(up) - np.log(down)) / (2 * np.log1p(rel))
+        frames = self.valid & np.isfinite(self._focal_at(height_m))
+        if not frames.any():
+            return float("nan")
+        return float(np.median(np.where(np.isfinite(s[frames]), s[frames], np.inf)))
 
     def cameras_at(self, height_m, offsets=None):
         """Per-frame cameras of the family member at ``height_m`` as CameraArrays."""

@@ -125,17 +125,13 @@ def test_an_undecided_family_branch_is_unreliable():
     assert clip_verdict(**GOOD, branch=given) == ("ok", [])
 
 
-def test_a_height_pressed_against_the_lanes_limit_is_unreliable(rng):
-    """A posterior whose upper tail reaches the family's fold (the highest member the lanes
-    allow) in most frames is flagged; one well below the fold, or near the fold of a few
-    frames only, is not."""
-    folds = np.full(80, 25.0)
-    pressed = np.log(rng.uniform(24.7, 24.95, 4000))  # 95 % within 1 % of 25 m
-    verdict, reasons = clip_verdict(100, 80, 100, rhat=1.0, ess=900, log_height_draws=pressed,
-                                    fold_heights=folds)
+def test_a_height_that_barely_fixes_the_camera_is_unreliable():
+    """Near the family's top the focal length moves many percent per percent of height: flagged
+    above 5 (and at the top itself, infinite); a broadcast camera (about 1) and an unknown
+    sensitivity (NaN) are not."""
+    verdict, reasons = clip_verdict(**GOOD, member_sensitivity=12.0)
     assert verdict == "unreliable"
-    assert any(r.startswith("height at the lanes' limit (95 % at 24.9") for r in reasons), reasons
-    below = np.log(rng.normal(20.0, 0.3, 4000))
-    assert clip_verdict(100, 80, 100, rhat=1.0, ess=900, log_height_draws=below, fold_heights=folds) == ("ok", [])
-    few = np.r_[np.full(20, 25.0), np.full(60, 40.0)]  # most frames reach far higher
-    assert clip_verdict(100, 80, 100, rhat=1.0, ess=900, log_height_draws=pressed, fold_heights=few) == ("ok", [])
+    assert reasons == ["height barely fixes the camera (focal length 12 % per % of height)"]
+    assert clip_verdict(**GOOD, member_sensitivity=float("inf"))[0] == "unreliable"
+    assert clip_verdict(**GOOD, member_sensitivity=1.1) == ("ok", [])
+    assert clip_verdict(**GOOD, member_sensitivity=float("nan")) == ("ok", [])

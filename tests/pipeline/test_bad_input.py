@@ -363,3 +363,20 @@ def test_an_unknown_camera_side_in_clip_json_is_a_clear_error(clip, tmp_path, ca
     _one_error_line(capsys, "clip.json", "'camera_side' must be auto, main or far")
     assert main(["calibrate", str(clip), "--out", str(tmp_path / "c")]) == 2
     _one_error_line(capsys, "clip.json", "camera_side")
+
+
+def test_bench_validation_refuses_to_score_old_result_folders(tmp_path):
+    """``bench validation --keep-outputs DIR`` never scores (or touches) a result folder that is
+    already there: it stops before any run."""
+    from probreg.bench.common import BenchReport
+    from probreg.bench.validation import _run_sets
+
+    clip = tmp_path / "clips" / "v99_old"
+    clip.mkdir(parents=True)
+    keep = tmp_path / "keep"
+    (keep / "v99_old").mkdir(parents=True)
+    (keep / "v99_old" / "angles.csv").write_text("old")
+    rep = BenchReport("validation", "t")
+    with pytest.raises(ValueError, match="already there"):
+        _run_sets(rep, [("validation clips (test)", {}, [clip])], None, keep=keep)
+    assert (keep / "v99_old" / "angles.csv").read_text() == "old"
