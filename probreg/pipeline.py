@@ -422,13 +422,14 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     out_dir = Path(out_dir)
     n_angle = int(np.sum(np.any(np.isfinite(np.array([v[0] for v in summ.values()])), axis=0)))
     prior_h = options.priors.camera_height
+    sensitivity = model.member_sensitivity(height["median"])
     verdict, reasons = clip_verdict(
         clip.n_frames, calibrated=sum(c is not None for c in cam_list), frames_with_angles=n_angle,
         rhat=diag["rhat_height"], ess=diag["ess_height"], log_height_draws=flat[:, 0],
         log_height_prior_sd=getattr(prior_h, "log_sd", None), side=side, bone_cv_pct=bone_length_cv(joints_med),
         speed_mps=gait_s.get("speed_mps", {}).get("median"),
         stature_draws=flat[:, 1], stature_prior=options.priors.stature, branch=branch,
-        member_sensitivity=model.member_sensitivity(height["median"]))
+        member_sensitivity=sensitivity)
     with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=inputs, log=log) as tmp:
         _copy_extra(tmp, extra_files)
         write_angles_csv(tmp / "angles.csv", clip.fps, {k: v[0] for k, v in summ.items()},
@@ -451,6 +452,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                                      "camera_side": side.to_dict(), "branch": branch.to_json(),
                                      "input_notes": list(clip.notes), **extra,
                                      "diagnostics": diag, "timings_s": timings, "height_m": height,
+                                     "height_member_sensitivity": sensitivity,
                                      "lens": lens_doc, "band_decomposition": decomposition,
                                      "band_decomposition_method": DECOMPOSITION_METHOD,
                                      "frame_status": status, "noise_px": model.noise_sd,
