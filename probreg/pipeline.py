@@ -380,7 +380,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                                    extra_files)
     smp = options.sampler
     copies = None
-    if smp.bootstrap_noise:
+    if model.bootstraps_noise(smp.bootstrap_noise):
         # the bootstrap's re-noised keypoints do not depend on the posterior: made on the other
         # core while the sampler runs on this one
         n_copies = -(-smp.n_draws // smp.draws_per_noise_copy)

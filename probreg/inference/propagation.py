@@ -59,7 +59,7 @@ class DrawPropagation:
             the point liftings, ``gait`` from the noisy ones (contacts detected anew).
         """
         t0 = time.perf_counter()
-        with_noise = bootstrap_noise and np.isfinite(self.noise_sd) and self.noise_sd > 0
+        with_noise = self.bootstraps_noise(bootstrap_noise)
         out = self._lift_draws(draws, rng, with_noise, config, workers, progress, draws_per_noise_copy,
                                noise_copies)
         self.timings["propagation_s"] = time.perf_counter() - t0
@@ -117,6 +117,11 @@ class DrawPropagation:
                 out[a]["parts_over_total"] = float(tot / full) if full > 0 else None
         self.timings["decomposition_s"] = time.perf_counter() - t0
         return out
+
+    def bootstraps_noise(self, bootstrap_noise=True):
+        """Whether :meth:`propagate` re-simulates detector noise: asked for, and the clip's noise
+        level is known (clean keypoints have none to re-simulate)."""
+        return bool(bootstrap_noise and np.isfinite(self.noise_sd) and self.noise_sd > 0)
 
     def bootstrap_copies(self, rng, n):
         """``n`` re-noised copies of the cleaned keypoints, each cleaned again as the data were

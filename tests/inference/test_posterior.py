@@ -400,3 +400,14 @@ def test_member_sensitivity_is_small_for_a_broadcast_camera_and_grows_at_the_fam
     assert top > 1.5 * h
     assert m.member_sensitivity(0.995 * top) > 5.0
     assert np.isnan(m.member_sensitivity(10 * top))  # no frame has a member there
+
+
+def test_no_noise_copies_are_made_without_a_known_noise_level(model, monkeypatch):
+    """Keypoints whose noise level is unknown (or zero) are not re-noised: the pipeline then
+    starts no noise copies at all, as propagate adds no noise."""
+    m, _ = model
+    assert m.bootstraps_noise(True) == (np.isfinite(m.noise_sd) and m.noise_sd > 0)
+    assert not m.bootstraps_noise(False)
+    for level in (float("nan"), 0.0):
+        monkeypatch.setattr(m, "noise_sd", level)
+        assert not m.bootstraps_noise(True)
