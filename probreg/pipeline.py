@@ -274,7 +274,7 @@ def _branch_candidate(clip, reg, options, given, branch):
 def _forked_evidence(clip, reg, options, given, branch):
     """Start the log evidence of ``branch`` in a forked process (the caller builds the other
     branch meanwhile: on two cores the second branch costs no wall time); returns a function
-    that waits for ``("ok", log_z)`` or ``("error", message)`` (:func:`probreg.parallel.fork_call`)."""
+    that waits for ``("ok", log_z)`` or ``("error", message)`` (:func:`probreg.inference.parallel.fork_call`)."""
 
     def work():
         try:
