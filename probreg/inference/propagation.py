@@ -144,9 +144,9 @@ class DrawPropagation:
         seeds = rng.integers(0, 2**63 - 1, size=S)
         K = -(-S // int(draws_per_noise_copy)) if noise_copies is None else len(noise_copies)
         # noise copies, draw s uses copy s % K: given, or made by the workers from these seeds
-        noise = noise_copies if noise_copies is not None else (
-            rng.integers(0, 2**63 - 1, size=K) if with_noise else None)
-        job = (draws, L, seeds, noise, cfg, with_noise, self._joint_noise_scale() if with_noise else None)
+        noise_seeds = rng.integers(0, 2**63 - 1, size=K) if with_noise and noise_copies is None else None
+        job = (draws, L, seeds, K, noise_copies, noise_seeds, cfg, with_noise,
+               self._joint_noise_scale() if with_noise else None)
         workers = max(1, min(default_workers() if workers is None else int(workers), S))
         # a few chunks per worker: the progress bar moves, and a slow chunk does not hold the rest;
         # the draws that share a noise copy go in one chunk (the copy is cleaned once)
@@ -176,7 +176,7 @@ class DrawPropagation:
                         out[key].setdefault(k, np.full(S, np.nan))[s] = v
         return out
 
-    def _propagate_draws(self, indices, draws, L, seeds, noise, cfg, with_noise, per_joint):
+    def _propagate_draws(self, indices, draws, L, seeds, K, noise_copies, noise_seeds, cfg, with_noise, per_joint):
         """The liftings of some draws: {draw index: {joints, joints_point, angles, angles_point, gait}}."""
         out = {}
         copies = {}  # noise copy index -> cleaned re-noised keypoints
@@ -191,10 +191,10 @@ class DrawPropagation:
             seg = {k: float(v[s]) for k, v in L.items()}
             variants = [("_point", self.kp)]
             if with_noise:
-                k = s % len(noise)
+                k = s % K
                 if k not in copies:
-                    copies[k] = (noise[k] if isinstance(noise, list)
-                                 else self._noise_copy(np.random.default_rng(int(noise[k])), per_joint))
+                    copies[k] = (noise_copies[k] if noise_copies is not None
+                                 else self._noise_copy(np.random.default_rng(int(noise_seeds[k])), per_joint))
                 variants.append(("", copies[k]))
             res_s = {}
             for suffix, kp in variants:
