@@ -485,6 +485,8 @@ class SequenceCalibration:
     lane_width_m: float = LANE_WIDTH_M
     line_offsets: np.ndarray = field(default=None)
     branch: str = "narrow"
+    #: members per (height, branch, families) -> (families, members): see :meth:`members_at_height`
+    _members_cache: dict = field(default_factory=dict, init=False, repr=False, compare=False)
 
     def __post_init__(self):
         if self.line_offsets is None:
@@ -500,7 +502,7 @@ class SequenceCalibration:
         Remembered per height, branch and families (several steps of a registration ask for
         the same height; the members are immutable)."""
         key = (float(height_m), self.branch, tuple(map(id, self.families)))
-        cache = self.__dict__.setdefault("_members_cache", {})
+        cache = self._members_cache
         if key not in cache:
             if len(cache) >= 16:
                 cache.clear()
