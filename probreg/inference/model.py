@@ -63,6 +63,7 @@ from ..geometry.rays import CameraArrays, _as_list
 from ..lifting import LiftConfig
 from ..lifting.trajectory import _runs, fit_ground_track
 from .bands import stance_window
+from .heights import height_grid
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
 from .parallel import default_workers, fork_map
 from .propagation import DrawPropagation
@@ -160,13 +161,16 @@ class ClipModel(DrawPropagation, EmceeSampling):
                                      f"heights the lanes allow ({lo:.1f}-{hi:.1f} m)")
         self.h_ref = float(np.clip(priors.camera_height.centre(), g_lo, g_hi))
         self._fix_offsets()
-        self.grid = np.geomspace(g_lo, g_hi, n_grid)
+        # refined below the frames' branch tops (probreg.inference.heights)
+        tops = np.nanmax(np.where(np.isfinite(self.h[self.valid]), self.h[self.valid], -np.inf), axis=1)
+        self.grid = height_grid(g_lo, g_hi, n_grid, tops)
         # two passes: contacts and lane offsets detected at a wrong height are wrong (a 50 %
         # error distorts the cast feet), so the first pass finds a reference height from
         # the limb lengths and the static camera alone, the second scores every term there
         self._precompute()
-        theta = np.column_stack([np.log(self.grid), np.full(n_grid, priors.stature.centre()),
-                                 np.ones((n_grid, len(SEGMENTS)))])
+        n_g = len(self.grid)
+        theta = np.column_stack([np.log(self.grid), np.full(n_g, priors.stature.centre()),
+                                 np.ones((n_g, len(SEGMENTS)))])
         if self.lens is not None:
             theta = np.column_stack([theta, self.k1_at(self.grid)])
         saved = self.track_weight

@@ -58,3 +58,24 @@ def test_unknown_branch_is_a_clear_error(small_clip, tmp_path):
         run_clip(small_clip, tmp_path / "x", RunOptions(sampler=FAST, report=False, branch="sideways"),
                  log=lambda m: None)
     assert not (tmp_path / "x").exists()  # refused before any work, nothing written
+
+
+def test_likelihood_reaches_the_top_of_the_family(steep_clip):
+    """Just below the frames' highest cameras (where a steep near camera sits) the likelihood is
+    defined: the height grid is refined there (it used to end a whole grid step, ~8 %, below)."""
+    from probreg.pipeline import _branch_candidate, load_clip, register_clip, requested_side
+
+    clip = load_clip(steep_clip)
+    opts = RunOptions(sampler=FAST, report=False)
+    reg = register_clip(clip)
+    model = _branch_candidate(clip, reg, opts, requested_side("auto", clip.meta, clip.path / "clip.json"),
+                              "wide")[3]
+    tops = np.nanmax(np.where(np.isfinite(model.h[model.valid]), model.h[model.valid], -np.inf), axis=1)
+    below = model.grid[model.grid < tops.min()]
+    assert tops.min() - below.max() < 0.005 * tops.min()
+    h = tops.min() * np.array([0.999, 0.995, 0.98])
+    theta = np.zeros((3, len(model.param_names)))
+    theta[:, 0], theta[:, 1], theta[:, 2:] = np.log(h), 1.8, 1.0
+    if model.lens is not None:
+        theta[:, -1] = model.k1_at(h)
+    assert np.all(np.isfinite(model.log_likelihood(theta)))
