@@ -430,7 +430,20 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         speed_mps=gait_s.get("speed_mps", {}).get("median"),
         stature_draws=flat[:, 1], stature_prior=options.priors.stature, branch=branch,
         member_sensitivity=sensitivity)
+    status = [_frame_status(reg.frame_lanes[i], c, bool(model.inconsistent[i]), model.gap_distance[i])
+              for i, c in enumerate(cam_list)]
+    result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
+                       gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
+                       verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,
+                       frame_status=status, lens=lens_doc, band_decomposition=decomposition,
+                       branch=branch)
     with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=inputs, log=log) as tmp:
+        report = None
+        if options.report:
+            from .report.html import run_report
+
+            # the report (its figures: ~4 s) renders on the other core while the files are written
+            report = fork_call(lambda: run_report(tmp / "report.html", clip, result, joints_med, cam_list))
         _copy_extra(tmp, extra_files)
         write_angles_csv(tmp / "angles.csv", clip.fps, {k: v[0] for k, v in summ.items()},
                          {k: v[1] for k, v in summ.items()}, {k: v[2] for k, v in summ.items()})
@@ -444,8 +457,6 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         write_json(tmp / "camera.json", cj)
         idata.to_netcdf(str(tmp / "posterior.nc"))
         write_json(tmp / "gait.json", gait_s)
-        status = [_frame_status(reg.frame_lanes[i], c, bool(model.inconsistent[i]), model.gap_distance[i])
-                  for i, c in enumerate(cam_list)]
         extra = {} if clip.keypoints_outside is None else {
             "keypoints_outside_image": clip.keypoints_outside.tolist()}
         write_json(tmp / "run.json", {"verdict": verdict, "verdict_reasons": reasons,
@@ -459,15 +470,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                                      "noise_rho": model.noise_rho, "n_draws": len(draws),
                                      "priors": {"camera_height": repr(options.priors.camera_height),
                                                 "stature": repr(options.priors.stature)}})
-        result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
-                           gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
-                           verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,
-                           frame_status=status, lens=lens_doc, band_decomposition=decomposition,
-                           branch=branch)
-        if options.report:
-            from .report.html import run_report
-
-            run_report(tmp / "report.html", clip, result, joints_med, cam_list)
+        if report is not None:
+            report()  # a failure in the process renders the report again here, and raises as itself
     log(f"height {height['median']:.2f} m [{height['lo']:.2f}, {height['hi']:.2f}]; "
         f"{diag['steps']} steps (tau max {max(diag['tau'].values()):.0f}); total {timings['total_s']:.1f} s")
     return result
