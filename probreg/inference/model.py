@@ -162,8 +162,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self.h_ref = float(np.clip(priors.camera_height.centre(), g_lo, g_hi))
         self._fix_offsets()
         # refined below the frames' branch tops (probreg.inference.heights)
-        tops = np.nanmax(np.where(np.isfinite(self.h[self.valid]), self.h[self.valid], -np.inf), axis=1)
-        self.grid = height_grid(g_lo, g_hi, n_grid, tops)
+        self.grid = height_grid(g_lo, g_hi, n_grid, np.nanmax(self.h[self.valid], axis=1))
         # two passes: contacts and lane offsets detected at a wrong height are wrong (a 50 %
         # error distorts the cast feet), so the first pass finds a reference height from
         # the limb lengths and the static camera alone, the second scores every term there
