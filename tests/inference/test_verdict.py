@@ -127,11 +127,13 @@ def test_an_undecided_family_branch_is_unreliable():
 
 def test_a_height_that_barely_fixes_the_camera_is_unreliable():
     """Near the family's top the focal length moves many percent per percent of height: flagged
-    above 5 (and at the top itself, infinite); a broadcast camera (about 1) and an unknown
+    above 3.3 (and at the top itself, infinite); a broadcast camera (about 1) and an unknown
     sensitivity (NaN) are not."""
     verdict, reasons = clip_verdict(**GOOD, member_sensitivity=12.0)
     assert verdict == "unreliable"
     assert reasons == ["height barely fixes the camera (focal length 12 % per % of height)"]
     assert clip_verdict(**GOOD, member_sensitivity=float("inf"))[0] == "unreliable"
     assert clip_verdict(**GOOD, member_sensitivity=1.1) == ("ok", [])
+    assert clip_verdict(**GOOD, member_sensitivity=3.2) == ("ok", [])  # either side of 3.3
+    assert clip_verdict(**GOOD, member_sensitivity=3.4)[0] == "unreliable"
     assert clip_verdict(**GOOD, member_sensitivity=float("nan")) == ("ok", [])
