@@ -118,6 +118,87 @@ def _null_vector_2(M):
     return v, smallest / np.maximum(np.sqrt(np.maximum(lam_max, 0.0)), 1e-300)
 
 
+def _members_batch(fams, focal_px):
+    """:meth:`CalibrationFamily.members` of several families with the same number of lines
+    at once: ``focal_px`` (B, m), one row per family; arrays with leading shape (B, m).
+
+    The closed form, batched: for each focal length the lane direction ``r1`` follows from
+    the vanishing point; each line's interpretation plane gives a ray in the cross-section
+    perpendicular to ``r1``; the equal spacing of the lines fixes the ground normal in that
+    cross-section (a 2 x 2 null vector), and the spacing's scale the height."""
+    f = np.asarray(focal_px, float)
+    nb, nm = f.shape
+    pp = np.stack([fam.principal_point for fam in fams])
+    cx, cy = pp[:, 0:1], pp[:, 1:2]  # (B, 1)
+    v = np.stack([fam.vp for fam in fams])
+    # lane direction r1 in camera coordinates (per f)
+    r1 = np.stack([(v[:, 0:1] - cx * v[:, 2:3]) / f, (v[:, 1:2] - cy * v[:, 2:3]) / f,
+                   np.broadcast_to(v[:, 2:3], f.shape)], -1)
+    r1 = r1 / np.linalg.norm(r1, axis=-1, keepdims=True)
+    # orient r1 along the running direction: image motion of +x at a sample point
+    S = np.stack([fam.samples for fam in fams])  # (B, n, 2)
+    s0 = S.mean(1)
+    xn = np.stack([(s0[:, 0:1] - cx) / f, (s0[:, 1:2] - cy) / f], -1)
+    img_dir = r1[..., :2] - xn * r1[..., 2:3]
+    fwd = np.stack([fam.forward_px for fam in fams])
+    sign = np.sign(img_dir[..., 0] * fwd[:, 0:1] + img_dir[..., 1] * fwd[:, 1:2])
+    sign[sign == 0] = 1.0
+    r1 = r1 * sign[..., None]
+    # interpretation-plane normals K^T l (per f), and rays w_i = r1 x n_i in the cross-section
+    L = np.stack([fam.lines for fam in fams])  # (B, n, 3)
+    nl = L.shape[1]
+    c3 = L[..., 0] * cx + L[..., 1] * cy + L[..., 2]
+    n = np.stack([f[:, :, None] * L[:, None, :, 0], f[:, :, None] * L[:, None, :, 1],
+                  np.broadcast_to(c3[:, None, :], (nb, nm, nl))], -1)
+    n = n / np.linalg.norm(n, axis=-1, keepdims=True)
+    wv = cross3(r1[:, :, None, :], n)
+    wv /= np.linalg.norm(wv, axis=-1, keepdims=True)
+    d = np.stack([(S[:, None, :, 0] - cx[:, :, None]) / f[:, :, None],
+                  (S[:, None, :, 1] - cy[:, :, None]) / f[:, :, None], np.ones((nb, nm, nl))], -1)
+    wv *= np.sign(np.sum(wv * d, -1, keepdims=True))
+    # cross-section basis (a, b) with a x b = r1
+    helper = np.where(np.abs(r1[..., 1:2]) < 0.9, [0.0, 1.0, 0.0], [1.0, 0.0, 0.0])
+    a = cross3(helper, r1)
+    a /= np.linalg.norm(a, axis=-1, keepdims=True)
+    b = cross3(r1, a)
+    th = np.arctan2(np.sum(wv * b[:, :, None], -1), np.sum(wv * a[:, :, None], -1))  # (B, m, n)
+    # equal-spacing condition for triples (0, j, j+1): rows linear in (cos phi, sin phi)
+    k = np.stack([fam.indices for fam in fams])  # (B, n)
+    rows = []
+    for j in range(1, nl - 1):
+        m = j + 1
+        s_j0 = np.sin(th[..., j] - th[..., 0])
+        s_m0 = np.sin(th[..., m] - th[..., 0])
+        dk_m, dk_j = (k[:, m] - k[:, 0])[:, None], (k[:, j] - k[:, 0])[:, None]
+        rows.append(np.stack([s_j0 * dk_m * np.cos(th[..., m]) - s_m0 * dk_j * np.cos(th[..., j]),
+                              s_j0 * dk_m * np.sin(th[..., m]) - s_m0 * dk_j * np.sin(th[..., j])], -1))
+    M = np.stack(rows, 2)  # (B, m, n-2, 2)
+    cs, resid = _null_vector_2(M.reshape(nb * nm, nl - 2, 2))  # null vector = (cos phi, sin phi) up to sign
+    cs, resid = cs.reshape(nb, nm, 2), resid.reshape(nb, nm)
+    u = cs[..., 0:1] * a + cs[..., 1:2] * b
+    cosd = np.sum(wv * u[:, :, None], -1)  # w_i . u: rays must point down
+    flip = np.sum(cosd, -1) > 0
+    u[flip] *= -1
+    cosd[flip] *= -1
+    ey = cross3(u, r1)
+    g = -np.sum(wv * ey[:, :, None], -1) / cosd  # lateral offsets / h
+    # affine fit g = A + B k  ->  h = -lane_width / B
+    kc = k - k.mean(-1, keepdims=True)
+    B = np.einsum("bmn,bn->bm", g - g.mean(-1, keepdims=True), kc) / np.sum(kc * kc, -1)[:, None]
+    A = g.mean(-1) - B * k.mean(-1)[:, None]
+    # index orientation: line 0 must be the innermost (largest y).  With B > 0 the
+    # image order of the pencil runs outward-in: count the indices from the other end.
+    flipped = B > 0
+    A = np.where(flipped, A + B * k.max(-1)[:, None], A)
+    B = np.where(flipped, -B, B)
+    h = -np.array([fam.lane_width_m for fam in fams])[:, None] / B
+    y_cam = -h * A  # line 0 at y = 0: 0 = y_cam + h * (A + B * 0)
+    valid = np.all(cosd < 0, -1) & (h > 0) & np.isfinite(h)
+    R = np.stack([r1, ey, u], -1)  # columns: track axes in camera coordinates
+    return {"R": R, "height_m": h, "y_m": y_cam, "residual": resid, "valid": valid,
+            "index_flipped": flipped}
+
+
 class CalibrationFamily:
     """The one-DOF family of cameras consistent with one frame's lane lines.
 
@@ -232,74 +313,10 @@ class CalibrationFamily:
         indices count from the other end of the pencil: absolute index = max - index).
         """
         f = np.atleast_1d(np.asarray(focal_px, float))
-        cx, cy = self.principal_point
-        v = self.vp
-        # lane direction r1 in camera coordinates (per f)
-        r1 = np.stack([(v[0] - cx * v[2]) / f, (v[1] - cy * v[2]) / f, np.full_like(f, v[2])], -1)
-        r1 /= np.linalg.norm(r1, axis=-1, keepdims=True)
-        # orient r1 along the running direction: image motion of +x at a sample point
-        s0 = self.samples.mean(0)
-        xn = np.stack([(s0[0] - cx) / f, (s0[1] - cy) / f], -1)
-        img_dir = r1[..., :2] - xn * r1[..., 2:3]
-        sign = np.sign(img_dir @ self.forward_px)
-        sign[sign == 0] = 1.0
-        r1 *= sign[..., None]
-        # interpretation-plane normals K^T l (per f), and rays w_i = r1 x n_i in the cross-section
-        L = self.lines
-        n = np.stack([f[:, None] * L[None, :, 0], f[:, None] * L[None, :, 1],
-                      np.broadcast_to(L[:, 0] * cx + L[:, 1] * cy + L[:, 2], (len(f), len(L)))], -1)
-        n /= np.linalg.norm(n, axis=-1, keepdims=True)
-        wv = cross3(r1[:, None, :], n)
-        wv /= np.linalg.norm(wv, axis=-1, keepdims=True)
-        d = np.stack([(self.samples[:, 0] - cx)[None] / f[:, None], (self.samples[:, 1] - cy)[None] / f[:, None],
-                      np.ones((len(f), len(L)))], -1)
-        wv *= np.sign(np.sum(wv * d, -1, keepdims=True))
-        # cross-section basis (a, b) with a x b = r1
-        helper = np.where(np.abs(r1[..., 1:2]) < 0.9, [[0.0, 1.0, 0.0]], [[1.0, 0.0, 0.0]])
-        a = cross3(helper, r1)
-        a /= np.linalg.norm(a, axis=-1, keepdims=True)
-        b = cross3(r1, a)
-        th = np.arctan2(np.sum(wv * b[:, None], -1), np.sum(wv * a[:, None], -1))  # (F, n)
-        # equal-spacing condition for triples (0, j, j+1): rows linear in (cos phi, sin phi)
-        k = self.indices
-        rows = []
-        for j in range(1, len(k) - 1):
-            m = j + 1
-            s_j0 = np.sin(th[:, j] - th[:, 0])
-            s_m0 = np.sin(th[:, m] - th[:, 0])
-            dk_m, dk_j = k[m] - k[0], k[j] - k[0]
-            rows.append(np.stack([s_j0 * dk_m * np.cos(th[:, m]) - s_m0 * dk_j * np.cos(th[:, j]),
-                                  s_j0 * dk_m * np.sin(th[:, m]) - s_m0 * dk_j * np.sin(th[:, j])], -1))
-        M = np.stack(rows, 1)  # (F, n-2, 2)
-        cs, resid = _null_vector_2(M)  # (F, 2) null vector = (cos phi, sin phi) up to sign
-        u = cs[:, 0:1] * a + cs[:, 1:2] * b
-        cosd = np.sum(wv * u[:, None], -1)  # w_i . u: rays must point down
-        flip = np.sum(cosd, -1) > 0
-        u[flip] *= -1
-        cosd[flip] *= -1
-        ey = cross3(u, r1)
-        g = -np.sum(wv * ey[:, None], -1) / cosd  # lateral offsets / h
-        # affine fit g = A + B k  ->  h = -lane_width / B
-        kc = k - k.mean()
-        B = (g - g.mean(-1, keepdims=True)) @ kc / (kc @ kc)
-        A = g.mean(-1) - B * k.mean()
-        # index orientation: line 0 must be the innermost (largest y).  With B > 0 the
-        # image order of the pencil runs outward-in: count the indices from the other end.
-        flipped = B > 0
-        A = np.where(flipped, A + B * k.max(), A)
-        B = np.where(flipped, -B, B)
-        h = -self.lane_width_m / B
-        y_cam = -h * A  # line 0 at y = 0: 0 = y_cam + h * (A + B * 0)
-        valid = np.all(cosd < 0, -1) & (h > 0) & np.isfinite(h)
-        R = np.stack([r1, ey, u], -1)  # columns: track axes in camera coordinates
-        return {"R": R, "height_m": h, "y_m": y_cam, "residual": resid, "valid": valid,
-                "index_flipped": flipped}
+        return {k: v[0] for k, v in _members_batch([self], f[None]).items()}
 
     def member_at_focal(self, focal_px):
-        m = self.members(np.array([float(focal_px)]))
-        return FamilyMember(focal_px=float(focal_px), R=m["R"][0], height_m=float(m["height_m"][0]),
-                            y_m=float(m["y_m"][0]), residual=float(m["residual"][0]),
-                            valid=bool(m["valid"][0]), index_flipped=bool(m["index_flipped"][0]))
+        return _member_at(self.members(np.array([float(focal_px)])), float(focal_px), 0)
 
     def oriented_indices(self, member: "FamilyMember"):
         """Indices counted from the innermost observed line (0) outwards, for a member."""
@@ -361,6 +378,16 @@ class FamilyParameter(ABC):
         ``branch="narrow"`` (default, the broadcast case) takes the solution
         with the longest focal length, ``"wide"`` the shortest.
         """
+        lo, hi = self._bracket(family, value, branch)
+        grid = _fine_grid(lo, hi)
+        fx = np.exp(grid)
+        mm = family.members(fx)
+        root = _root_on_grid(grid, np.where(mm["valid"], self.values(family, fx, mm), np.nan) - value, branch)
+        return root if root is not None else self._root_by_brent(family, value, lo, hi)
+
+    def _bracket(self, family, value, branch):
+        """``(log f, log f)`` of the grid step of :meth:`CalibrationFamily.focal_range` where the
+        parameter crosses ``value`` on ``branch`` (raises :class:`CalibrationError`)."""
         if not np.isfinite(value):
             raise CalibrationError(f"{self.name} must be finite")
         f, m = family.focal_range()
@@ -375,23 +402,11 @@ class FamilyParameter(ABC):
         if branch not in ("narrow", "wide"):
             raise CalibrationError(f"branch must be 'narrow' or 'wide', got {branch!r}")
         i = cross[-1] if branch == "narrow" else cross[0]
-        # one refinement on a finer log grid (a single vectorised evaluation: a call costs
-        # far more than its points) brackets the root to ~4e-3 in log f; inverse cubic
-        # interpolation through the four grid points around it is then exact to ~1e-10
-        # (the grid reaches one step beyond the bracket on each side, so that the
-        # interpolation has its four points wherever the root lies)
-        lo, hi = np.log(f[i]), np.log(f[i + 1])
-        step = (hi - lo) / 16
-        grid = lo + step * np.arange(-1, 18)
-        fx = np.exp(grid)
-        mm = family.members(fx)
-        d = np.where(mm["valid"], self.values(family, fx, mm), np.nan) - value
-        ok = np.isfinite(d)
-        c = np.flatnonzero(ok[:-1] & ok[1:] & (np.sign(d[:-1]) != np.sign(d[1:])))
-        c = c[(c >= 1) & (c <= 16)]  # crossings inside the bracket only
-        if len(c):
-            j = c[-1] if branch == "narrow" else c[0]
-            return float(np.exp(_inverse_interpolate(grid, d, j)))
+        return np.log(f[i]), np.log(f[i + 1])
+
+    def _root_by_brent(self, family, value, lo, hi):
+        """Brent's method inside the bracket, where the refinement of :func:`_root_on_grid` lost
+        the crossing (raises :class:`CalibrationError` when the bracket does not hold)."""
 
         def fn(logf):
             fx = np.exp(logf)
@@ -406,6 +421,34 @@ class FamilyParameter(ABC):
             raise CalibrationError(f"no family member with {self.name} = {value:g} {self.unit} "
                                    f"(the crossing near f = {np.exp(lo):.4g} px does not hold)")
         return float(np.exp(brentq(fn, lo, hi, xtol=1e-13, rtol=1e-13)))
+
+
+def _member_at(members, focal_px, j):
+    """The :class:`FamilyMember` at position ``j`` of vectorised ``members``."""
+    return FamilyMember(focal_px=focal_px, R=members["R"][j], height_m=float(members["height_m"][j]),
+                        y_m=float(members["y_m"][j]), residual=float(members["residual"][j]),
+                        valid=bool(members["valid"][j]), index_flipped=bool(members["index_flipped"][j]))
+
+
+def _fine_grid(lo, hi):
+    """One refinement of a bracket ``(lo, hi)`` of log focal lengths, on a finer log grid (a
+    single vectorised evaluation: a call costs far more than its points).  It brackets the
+    root to ~4e-3 in log f; inverse cubic interpolation through the four grid points around
+    it is then exact to ~1e-10.  The grid reaches one step beyond the bracket on each side,
+    so that the interpolation has its four points wherever the root lies."""
+    return lo + (hi - lo) / 16 * np.arange(-1, 18)
+
+
+def _root_on_grid(grid, d, branch):
+    """Focal length where ``d`` (the parameter minus its value on :func:`_fine_grid`) crosses
+    zero inside the bracket, or ``None`` when the crossing did not survive the refinement."""
+    ok = np.isfinite(d)
+    c = np.flatnonzero(ok[:-1] & ok[1:] & (np.sign(d[:-1]) != np.sign(d[1:])))
+    c = c[(c >= 1) & (c <= 16)]  # crossings inside the bracket only
+    if not len(c):
+        return None
+    j = c[-1] if branch == "narrow" else c[0]
+    return float(np.exp(_inverse_interpolate(grid, d, j)))
 
 
 def _inverse_interpolate(x, y, j):
@@ -511,15 +554,39 @@ class SequenceCalibration:
         return list(cache[key][1])
 
     def _solve_members(self, height_m):
-        out = []
-        for fam in self.families:
+        """Every frame's member at ``height_m``: :meth:`HeightParameter.focal_for` per frame, with
+        the refinement and the members at the roots evaluated for all frames at once (families
+        with the same number of lines in one batch)."""
+        param = HeightParameter()
+        out = [None] * len(self.families)
+        groups = {}
+        for i, fam in enumerate(self.families):
             if fam is None:
-                out.append(None)
                 continue
             try:
-                out.append(fam.member_at_focal(HeightParameter().focal_for(fam, height_m, self.branch)))
+                lo, hi = param._bracket(fam, height_m, self.branch)
             except CalibrationError:
-                out.append(None)
+                continue
+            groups.setdefault(len(fam.lines), []).append((i, fam, lo, hi))
+        roots = {}
+        for group in groups.values():
+            grids = np.stack([_fine_grid(lo, hi) for _, _, lo, hi in group])
+            mm = _members_batch([g[1] for g in group], np.exp(grids))
+            d = np.where(mm["valid"], mm["height_m"], np.nan) - height_m
+            for r, (i, fam, lo, hi) in enumerate(group):
+                root = _root_on_grid(grids[r], d[r], self.branch)
+                try:
+                    roots[i] = root if root is not None else param._root_by_brent(fam, height_m, lo, hi)
+                except CalibrationError:
+                    continue
+        for group in groups.values():
+            found = [(i, fam) for i, fam, _, _ in group if i in roots]
+            if not found:
+                continue
+            f = np.array([[roots[i]] for i, _ in found])
+            mm = _members_batch([fam for _, fam in found], f)
+            for r, (i, _) in enumerate(found):
+                out[i] = _member_at({k: v[r] for k, v in mm.items()}, float(f[r, 0]), 0)
         return out
 
     def cameras_at_height(self, height_m, extra_offset=0, x_m=0.0, dist=None):
