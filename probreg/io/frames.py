@@ -24,27 +24,16 @@ def _imread(path):
 PREFETCH = 4
 
 
-def decode_threads():
-    """Background threads that decode images: one per core the run may use
-    (:func:`probreg.inference.parallel.default_workers`, so ``probreg batch``'s single-core
-    workers decode on one), at most 2.  Decoding a 1080p JPEG (~17 ms) takes longer than
-    measuring its lanes (~10 ms): with one thread the lane step waits for the decoder."""
-    from ..inference.parallel import default_workers
-
-    return max(1, min(2, default_workers()))
-
-
 def _prefetched(paths, n):
-    """``(i, image or None)`` for ``i < n``, decoded on background threads
-    (:func:`decode_threads`) while the caller works on the previous frames (OpenCV releases
-    the GIL while it decodes, so decoding, more than half of the lane step's time at 1080p,
-    overlaps the lane measurement).  The same images in the same order as decoding them one
-    by one."""
+    """``(i, image or None)`` for ``i < n``, decoded on a background thread while the caller
+    works on the previous frames (OpenCV releases the GIL while it decodes, so decoding, a
+    third of the lane step's time at 1080p, overlaps the lane measurement).  The same images
+    in the same order as decoding them one by one."""
     from collections import deque
     from concurrent.futures import ThreadPoolExecutor
 
     paths = list(paths)[:n]
-    with ThreadPoolExecutor(max_workers=decode_threads(), thread_name_prefix="probreg-decode") as pool:
+    with ThreadPoolExecutor(max_workers=1, thread_name_prefix="probreg-decode") as pool:
         pending = deque()
         for i in range(n):
             pending.append(pool.submit(_imread, paths[i]) if i < len(paths) else None)
