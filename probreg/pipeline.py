@@ -231,7 +231,8 @@ def _write_uncalibrated(clip, reg, side, out_dir, options, message, t0, log, inp
     F = clip.n_frames
     counts = reg.status_counts()
     reasons = [f"calibrated_frames 0/{F}", f"frames_with_angles 0/{F}"] + (
-        [f"no plausible camera ({message})"] if "do not overlap" in message else []) + [
+        [f"no plausible camera ({message})"] if ("do not overlap" in message or "finite posterior" in message)
+        else []) + [
         f"lanes {k} {v}/{F}" for k, v in sorted(counts.items(), key=lambda kv: -kv[1])]
     status = [fl.status for fl in reg.frame_lanes]
     timings = {"total_s": time.perf_counter() - t0}

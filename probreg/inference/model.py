@@ -16,7 +16,8 @@ Likelihood (every term a function of the height; the limb terms also of the leng
 * static camera: the family members at one height must share one camera
   position; the spread of their lateral positions over the clip (lane-line
   evidence that survives the per-frame one-DOF freedom) is scored with a
-  Student-t;
+  Student-t in units of the members' own frame-to-frame jitter at that height
+  (:mod:`probreg.inference.static`);
 * the ground-contact trajectory: the Kalman filter's marginal
   log-likelihood of the contact points (a runner's path is smooth; a wrong
   height stretches and bends it);
@@ -32,7 +33,8 @@ Likelihood (every term a function of the height; the limb terms also of the leng
 * keypoints: the limb lengths measured in the sagittal plane at this height
   (the quantity the ray-sphere misses of the lifting depend on: a limb whose
   sphere is smaller than its keypoints' in-plane distance is missed) against
-  the parameter lengths, with the measurement's standard error.
+  the parameter lengths, with the measurement's standard error (normalised
+  relative to the measured length: both scale with the height).
 
 The height-dependent statistics are precomputed on a grid of heights and
 interpolated, so the log-probability is vectorised over walkers and costs
@@ -68,6 +70,7 @@ from .priors import SEGMENT_PROPORTIONS, ModelPriors
 from .parallel import default_workers, fork_map
 from .propagation import DrawPropagation
 from .sampling import EmceeSampling, SamplerSettings
+from .static import member_jitter, score_static
 
 __all__ = ["ClipModel", "SamplerSettings", "PARAM_NAMES", "STILLNESS_SYS_SD", "NoCalibrationError"]
 
@@ -167,19 +170,18 @@ class ClipModel(DrawPropagation, EmceeSampling):
         # error distorts the cast feet), so the first pass finds a reference height from
         # the limb lengths and the static camera alone, the second scores every term there
         self._precompute()
-        n_g = len(self.grid)
-        theta = np.column_stack([np.log(self.grid), np.full(n_g, priors.stature.centre()),
-                                 np.ones((n_g, len(SEGMENTS)))])
-        if self.lens is not None:
-            theta = np.column_stack([theta, self.k1_at(self.grid)])
         saved = self.track_weight
         self.track_weight = 0.0
-        lp = self.log_prob(theta)
+        lp = self._grid_log_prob()[1]
         self.track_weight = saved
         if np.isfinite(lp).any():
             self.h_ref = float(self.grid[int(np.nanargmax(np.where(np.isfinite(lp), lp, -np.inf)))])
         self._fix_offsets(final=True)
         self._precompute()
+        if not np.isfinite(self._grid_log_prob()[1]).any():
+            # e.g. a grazing view whose few calibrated frames give no limb lengths at any height
+            raise NoCalibrationError("no camera height the lanes allow gives a finite posterior (no limb "
+                                     "lengths or no consistent camera at any height)")
         self.timings = {"precompute_s": time.perf_counter() - t0}
 
     @property
@@ -393,6 +395,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self.stance_windows = self._stance_windows()
         slides = np.full((G, len(self.stance_windows)), np.nan)
         n_frames = max(int(self.valid.sum()), 1)
+        static_parts = {}
         # the clip's reference focal length (zoom ratios removed) at every grid height
         self.f_ref_grid = np.full(G, np.nan)
         zoom = self.lens.evidence.zoom if self.lens is not None else np.ones(self.F)
@@ -410,22 +413,19 @@ class ClipModel(DrawPropagation, EmceeSampling):
             # other term by hundreds of nats
             n_meas = max(len(tr.contact_points_m), 1)
             self.ll_track[g] = tr.log_likelihood / n_meas if np.isfinite(tr.log_likelihood) else -1e3
-            # static camera: one lateral position for all frames.  Residuals relative to the
-            # camera-athlete distance (scale-free), Student-t (nu = 4) with scale 0.3 %,
-            # tempered for the correlation of neighbouring frames (~10 frames)
+            # static camera: one lateral position for all frames (residuals relative to the
+            # camera-athlete distance, scored once every height is seen: probreg.inference.static)
             ys = cams.C[cams.valid, 1]
-            dist = np.abs(np.median(ys) - np.nanmedian(tr.position_m[:, 1]))
-            resid = (ys - np.median(ys)) / max(dist, 1.0)
+            dist = max(float(np.abs(np.median(ys) - np.nanmedian(tr.position_m[:, 1]))), 1.0)
             # a frame with lanes whose family has no member at this height (h beyond the
             # frame's branch) counts like a frame 10 % off the common position: otherwise a
             # height reached by a few odd frames only would be scored on those frames alone
             no_member = self.valid & ~(cams.valid & (self.gap_distance == 0))
-            per_frame = -2.5 * np.log1p((resid / 0.003) ** 2 / 4)
-            off_frame = -2.5 * np.log1p((0.1 / 0.003) ** 2 / 4)
-            self.ll_static[g] = float(np.sum(per_frame) + off_frame * no_member.sum()) * (
-                min(1.0, 25.0 / n_frames) if n_frames > 25 else 1.0) * 2.5
+            static_parts[g] = ((ys - np.median(ys)) / dist, int(no_member.sum()),
+                               member_jitter(cams.C[:, 1], cams.valid & (self.gap_distance == 0), dist))
             self._segment_stats(g, cams, tr)
             slides[g] = self._slides(cams, tr)
+        self.ll_static, self.static_noise_ratio = score_static(static_parts, len(self.grid), n_frames)
         self._score_slides(slides)
 
     def _stance_windows(self):
@@ -569,7 +569,9 @@ class ClipModel(DrawPropagation, EmceeSampling):
             obs = self._interp(self.seg_obs[s], lh)
             se = self._interp(self.seg_se[s], lh)
             # a height at which a seen segment cannot be measured is not a free pass
-            ll = ll - 0.5 * ((obs - L[s]) / se) ** 2 - np.log(se)
+            # normalised in the image's terms: obs and se scale together with the height, and a
+            # normaliser log(se) would add a spurious -log(h) per segment (heights pulled low)
+            ll = ll - 0.5 * ((obs - L[s]) / se) ** 2 - np.log(se / obs)
         if self.lens is not None:
             # plumb-line evidence: the image-space distortion this k1 makes at this height's focal length
             with np.errstate(invalid="ignore"):
@@ -587,16 +589,20 @@ class ClipModel(DrawPropagation, EmceeSampling):
         return np.where(np.isfinite(out), out, -np.inf)
 
     # ------------------------------------------------------------------ sampling
-    def initial_walkers(self, n, rng):
-        """Walkers around the best grid height with lengths at their observed values."""
+    def _grid_log_prob(self):
+        """Parameter vectors at the grid heights (prior-centre stature, unit proportions, the
+        lens's best ``k1``) and their log-posteriors."""
         theta_grid = []
-        for g, h in enumerate(self.grid):
-            st = self.priors.stature.centre()
-            th = np.r_[np.log(h), st, np.ones(len(SEGMENTS))]
+        for h in self.grid:
+            th = np.r_[np.log(h), self.priors.stature.centre(), np.ones(len(SEGMENTS))]
             if self.lens is not None:
                 th = np.r_[th, float(self.k1_at(h))]
             theta_grid.append(th)
-        lp = self.log_prob(np.array(theta_grid))
+        return theta_grid, self.log_prob(np.array(theta_grid))
+
+    def initial_walkers(self, n, rng):
+        """Walkers around the best grid height with lengths at their observed values."""
+        theta_grid, lp = self._grid_log_prob()
         g = int(np.nanargmax(np.where(np.isfinite(lp), lp, -np.inf)))
         base = theta_grid[g]
         # stature from the observed thigh + shank at that height, if available

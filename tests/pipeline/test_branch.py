@@ -36,13 +36,16 @@ def test_steep_near_camera_is_found_on_the_wide_branch(steep_clip, tmp_path):
     # grid step lower, with a 15 deg knee error and verdict ok)
     assert res.verdict == "unreliable"
     assert any(r.startswith("height barely fixes the camera") for r in res.verdict_reasons), res.verdict_reasons
-    # on the narrow branch the same lines make a camera that has the athlete run at a
-    # superhuman speed: the verdict says so
+    # forced onto the narrow branch, the lines either make a camera that has the athlete run at
+    # a superhuman speed, or (since the static-camera term follows the members' jitter, which
+    # no longer scores the family's top below lower heights) the posterior sits at the top,
+    # where the two branches meet near the true camera: either way the verdict says so
     forced = run_clip(steep_clip, tmp_path / "narrow", RunOptions(sampler=FAST, report=False, branch="narrow"),
                       log=lambda m: None)
     assert forced.branch.source == "given"
     assert forced.verdict == "unreliable"
-    assert any(r.startswith("running speed") for r in forced.verdict_reasons)
+    assert any(r.startswith(("running speed", "height barely fixes the camera"))
+               for r in forced.verdict_reasons), forced.verdict_reasons
 
 
 def test_broadcast_camera_stays_on_the_narrow_branch(small_clip, tmp_path):
