@@ -16,8 +16,9 @@ Likelihood (every term a function of the height; the limb terms also of the leng
 * static camera: the family members at one height must share one camera
   position; the spread of their lateral positions over the clip (lane-line
   evidence that survives the per-frame one-DOF freedom) is scored with a
-  Student-t in units of the members' own frame-to-frame jitter at that height
-  (:mod:`probreg.inference.static`);
+  Student-t with a scale of 0.3 % of the camera-athlete distance, or the
+  members' own frame-to-frame jitter at that height where the family amplifies
+  the lane noise beyond it (:mod:`probreg.inference.static`);
 * the ground-contact trajectory: the Kalman filter's marginal
   log-likelihood of the contact points (a runner's path is smooth; a wrong
   height stretches and bends it);
@@ -385,7 +386,6 @@ class ClipModel(DrawPropagation, EmceeSampling):
     def _precompute(self):
         G = len(self.grid)
         self.ll_track = np.full(G, -np.inf)
-        self.ll_static = np.full(G, -np.inf)
         self.seg_obs = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
         self.seg_se = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
         # contacts are detected once (reference height) so every hypothesis is scored on the
