@@ -66,7 +66,7 @@ from ..geometry.rays import CameraArrays, _as_list
 from ..lifting import LiftConfig
 from ..lifting.trajectory import _runs, fit_ground_track
 from .bands import stance_window
-from .heights import height_grid
+from .heights import HEIGHT_SYSTEMATIC_SD, height_grid, smear_log_likelihood
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
 from .parallel import default_workers, fork_map
 from .propagation import DrawPropagation
@@ -123,6 +123,9 @@ class ClipModel(DrawPropagation, EmceeSampling):
         Weight of the ground-track filter's (per-contact) log-likelihood.  Its
         absolute values depend on unmodelled effects (foot placement, detector
         noise in depth), so it enters damped; 1 uses it at face value.
+    height_systematic_sd : float
+        Systematic allowance (sd of log height) over which the height-only terms are
+        marginalised (:data:`probreg.inference.heights.HEIGHT_SYSTEMATIC_SD`; 0 turns it off).
 
     Raises
     ------
@@ -132,8 +135,9 @@ class ClipModel(DrawPropagation, EmceeSampling):
 
     def __init__(self, registration: ClipRegistration, keypoints_px, fps, athlete_lane=None,
                  priors: ModelPriors = ModelPriors(), dist=None, n_grid=36, branch="narrow",
-                 track_weight=0.2, lens=None):
+                 track_weight=0.2, lens=None, height_systematic_sd=HEIGHT_SYSTEMATIC_SD):
         t0 = time.perf_counter()
+        self.height_systematic_sd = float(height_systematic_sd)
         self.reg = registration
         self.lens = lens
         if lens is not None and dist is not None and np.any(dist):
@@ -385,6 +389,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
     # ------------------------------------------------------------------ likelihood on a grid
     def _precompute(self):
         G = len(self.grid)
+        self._precompute_id = getattr(self, "_precompute_id", 0) + 1
         self.ll_track = np.full(G, -np.inf)
         self.seg_obs = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
         self.seg_se = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
@@ -556,12 +561,22 @@ class ClipModel(DrawPropagation, EmceeSampling):
             lp = lp + self.lens.prior.logpdf(theta[:, -1])
         return lp
 
+    def _height_terms(self):
+        """The terms that depend on the camera height alone (ground track, static camera,
+        planted feet), marginalised over the height's systematic allowance
+        (:func:`probreg.inference.heights.smear_log_likelihood`): ``(log_grid, ll)``."""
+        key = (self.track_weight, self._precompute_id)
+        if getattr(self, "_height_cache", (None,))[0] != key:
+            with np.errstate(invalid="ignore"):
+                ll = self.track_weight * self.ll_track + self.ll_static + self.ll_still
+            self._height_cache = (key, smear_log_likelihood(self.grid, ll, self.height_systematic_sd))
+        return self._height_cache[1]
+
     def log_likelihood(self, theta):
         theta = np.atleast_2d(theta)
         lh = theta[:, 0]
-        with np.errstate(invalid="ignore"):
-            ll = (self.track_weight * self._interp(self.ll_track, lh) + self._interp(self.ll_static, lh)
-                  + self._interp(self.ll_still, lh))
+        x, ll_h = self._height_terms()
+        ll = np.interp(lh, x, ll_h, left=np.nan, right=np.nan)
         L = self.lengths(theta)
         for s in OBSERVED_SEGMENTS:
             if not np.isfinite(self.seg_obs[s]).any():

@@ -40,9 +40,11 @@ reason of its own, a short machine-readable string with the number that triggere
 ``height barely fixes the camera (...)``
     near the top of a frame's family (the fold, where the long-lens and the steep branches meet)
     the camera height stops selecting a member: a small change of height is a large change of
-    tilt, focal length and distance.  The check measures it at the posterior median height: the
-    median over calibrated frames of ``|d log f / d log h|`` (the focal length's relative change
-    per relative change of height; about 1 for a broadcast camera, infinite at the fold).  Above
+    tilt, focal length and distance.  The check measures it at the posterior median height and
+    at the ends of its 90 % interval, and takes the largest (a posterior that reaches towards the
+    fold is not pinned by its median's value): the median over calibrated frames of
+    ``|d log f / d log h|`` (the focal length's relative change per relative change of height;
+    about 1 for a broadcast camera, infinite at the fold).  Above
     :attr:`VerdictThresholds.max_member_sensitivity`, 3.3, a camera height known to ~3 % leaves
     the focal length and the camera's distance uncertain by more than 10 %, more than the bands
     can hold.  3 % is the median height error of cameras near the top (a tuning set of ten
@@ -180,7 +182,8 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
         Posterior draws of the stature, with ``stature_prior`` (a
         :class:`probreg.inference.NormalPrior`) its prior.
     member_sensitivity : float, optional
-        ``|d log f / d log h|`` of the family members at the posterior median height
+        ``|d log f / d log h|`` of the family members, the largest at the posterior median height
+        and the ends of its 90 % interval
         (:meth:`probreg.inference.ClipModel.member_sensitivity`).
 
     Returns

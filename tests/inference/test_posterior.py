@@ -449,6 +449,7 @@ def test_limb_term_does_not_tilt_towards_low_cameras():
     G = len(m.grid)
     m.ll_track, m.ll_static, m.ll_still = np.zeros(G), np.zeros(G), np.zeros(G)
     m.track_weight, m.lens = 0.2, None
+    m.height_systematic_sd, m._precompute_id = 0.015, 1
     per_m = {"thigh": 0.045, "shank": 0.044, "upper_arm": 0.033, "forearm": 0.026, "trunk": 0.05}
     m.seg_obs = {s: per_m[s] * m.grid for s in OBSERVED_SEGMENTS}
     m.seg_se = {s: 0.03 * m.seg_obs[s] for s in OBSERVED_SEGMENTS}
@@ -459,3 +460,28 @@ def test_limb_term_does_not_tilt_towards_low_cameras():
         thetas.append(np.r_[np.log(h), stature, props])
     ll = m.log_likelihood(np.array(thetas))
     assert np.all(np.isfinite(ll)) and np.ptp(ll) < 1e-6
+
+
+def test_a_height_spike_is_widened_to_the_systematic_allowance():
+    """Near the family's fold the height-only terms make a spike a few tenths of a percent wide;
+    marginalised over the systematic allowance, a height one allowance away scores half a
+    nat-squared below the peak (a Gaussian of that sd), and without the allowance it is
+    excluded.  The limb terms are left out (no segment observed)."""
+    from probreg.inference.model import OBSERVED_SEGMENTS
+
+    m = object.__new__(ClipModel)
+    m.grid = np.geomspace(5.0, 40.0, 4000)
+    G = len(m.grid)
+    m.ll_track, m.ll_still = np.zeros(G), np.zeros(G)
+    m.ll_static = -0.5 * (np.log(m.grid / 20.0) / 0.001) ** 2
+    m.track_weight, m.lens, m._precompute_id = 0.2, None, 1
+    m.seg_obs = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
+    m.seg_se = dict(m.seg_obs)
+    theta = np.array([np.r_[np.log(20.0 * f), 1.8, np.ones(7)] for f in (1.0, np.exp(0.015), np.exp(-0.03))])
+    m.height_systematic_sd = 0.015
+    ll = m.log_likelihood(theta)
+    assert ll[1] - ll[0] == pytest.approx(-0.5, abs=0.02)
+    assert ll[2] - ll[0] == pytest.approx(-2.0, abs=0.05)
+    m.height_systematic_sd, m._precompute_id = 0.0, 2
+    ll = m.log_likelihood(theta)
+    assert ll[1] - ll[0] < -100
