@@ -221,7 +221,9 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
             reasons.append(f"prior-dominated height (posterior log-sd {sd:.2f}, prior {log_height_prior_sd:.2f})")
     if (member_sensitivity is not None and not np.isnan(member_sensitivity)
             and member_sensitivity > t.max_member_sensitivity):
-        reasons.append(f"height barely fixes the camera (focal length {member_sensitivity:.3g} % per % of height)")
+        reasons.append("height barely fixes the camera (" + (
+            f"focal length {member_sensitivity:.3g} % per % of height" if np.isfinite(member_sensitivity)
+            else "the height interval reaches the family's top") + ")")
     if side is not None and side.source == "evidence":
         if side.log_ratio < t.min_side_log_ratio or side.cues_disagree:
             reasons.append(f"camera_side evidence ratio {np.exp(min(side.log_ratio, 50.0)):.3g}"

@@ -132,7 +132,8 @@ def test_a_height_that_barely_fixes_the_camera_is_unreliable():
     verdict, reasons = clip_verdict(**GOOD, member_sensitivity=12.0)
     assert verdict == "unreliable"
     assert reasons == ["height barely fixes the camera (focal length 12 % per % of height)"]
-    assert clip_verdict(**GOOD, member_sensitivity=float("inf"))[0] == "unreliable"
+    assert clip_verdict(**GOOD, member_sensitivity=float("inf")) == (
+        "unreliable", ["height barely fixes the camera (the height interval reaches the family's top)"])
     assert clip_verdict(**GOOD, member_sensitivity=1.1) == ("ok", [])
     assert clip_verdict(**GOOD, member_sensitivity=3.2) == ("ok", [])  # either side of 3.3
     assert clip_verdict(**GOOD, member_sensitivity=3.4)[0] == "unreliable"
