@@ -33,6 +33,7 @@ from __future__ import annotations
 import csv
 import hashlib
 import json
+import math
 import os
 import time
 from dataclasses import dataclass
@@ -52,6 +53,7 @@ MANIFEST_COLUMNS = {
     "det_model": ("det_model", "path"), "athlete": ("athlete", str), "fps": ("fps", float),
     "seed": ("seed", int), "walkers": ("walkers", int), "max_steps": ("max_steps", int), "draws": ("draws", int),
     "dist": ("dist", str), "min_score": ("min_score", float), "name": ("name", str),
+    "height_allowance": ("height_allowance", float),
 }
 
 #: columns of ``summary.csv``
@@ -69,7 +71,7 @@ def _defaults():
     return {"stature": None, "stature_sd": None, "height_m": None, "height_log_sd": None,
             "camera_side": run.camera_side, "model": None, "det_model": None, "athlete": None, "fps": None,
             "seed": smp.seed, "walkers": smp.n_walkers, "max_steps": smp.max_steps, "draws": smp.n_draws,
-            "dist": None, "min_score": run.min_score}
+            "dist": None, "min_score": run.min_score, "height_allowance": run.height_allowance}
 
 
 #: options of a batch entry with their ``probreg run`` defaults
@@ -190,8 +192,11 @@ def _run_options(o):
                                       stature_sd=o["stature_sd"])
     sampler = SamplerSettings(n_walkers=int(o["walkers"]), max_steps=int(o["max_steps"]), n_draws=int(o["draws"]),
                               seed=int(o["seed"]))
+    allowance = float(o["height_allowance"])
+    if not (math.isfinite(allowance) and allowance >= 0):
+        raise ValueError(f"height_allowance must be a finite number >= 0, got {o['height_allowance']!r}")
     return RunOptions(priors=priors, sampler=sampler, dist=dist, min_score=float(o["min_score"]),
-                      camera_side=o["camera_side"], overwrite=False)
+                      camera_side=o["camera_side"], overwrite=False, height_allowance=allowance)
 
 
 def run_entry(entry: BatchEntry, out_dir, digest):

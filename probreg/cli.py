@@ -120,7 +120,7 @@ def _run_options(args):
 
     return RunOptions(priors=priors, sampler=sampler, dist=_parse_dist(args.dist), min_score=args.min_score,
                       overwrite=args.overwrite, camera_side=args.camera_side, progress=_progress(args),
-                      branch=args.branch,
+                      branch=args.branch, height_allowance=args.height_allowance,
                       lens=args.lens, lens_prior=LensPrior(sd=args.lens_k1_sd))
 
 
@@ -187,6 +187,13 @@ def _cmd_demo(args):
     print(f"synthetic clip: {clip_dir}\nresults and report: {out / 'result'} (report.html); "
           f"ground truth overview: {out / 'clip_report.html'}")
     return _verdict_exit(res)
+
+
+def _nonneg_float(text):
+    """argparse type: a finite number >= 0 (not a number at all: argparse's 'invalid value')."""
+    if not 0 <= (v := float(text)) < float("inf"):
+        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
+    return v
 
 
 def _parse_dist(text):
@@ -397,13 +404,11 @@ def _add_run_options(p):
     g.add_argument("--walkers", type=int, default=24)
     g.add_argument("--max-steps", type=int, default=8000, help="sampling budget (steps after burn-in)")
     g.add_argument("--draws", type=int, default=60, help="posterior draws propagated to angles")
-    g.add_argument("--draws-per-noise-copy", type=int, default=2,
-                   help="posterior draws that share one re-noised copy of the keypoints in the bootstrap "
-                        "(default 2; 1: a copy per draw, slower)")
+    g.add_argument("--draws-per-noise-copy", type=int, default=2, help="posterior draws that share one re-noised "
+                   "copy of the keypoints in the bootstrap (default 2; 1: a copy per draw, slower)")
     g.add_argument("--moves", choices=("de", "stretch"), default="de",
                    help="emcee moves: differential evolution (default; mixes faster) or the stretch move")
-    g.add_argument("--dist", default=None, help="known lens distortion k1,k2,p1,p2,k3 (use --dist=...); "
-                                                "overrides --lens")
+    g.add_argument("--dist", default=None, help="known lens distortion k1,k2,p1,p2,k3 (use --dist=...); overrides --lens")
     g.add_argument("--lens", choices=("infer", "none"), default="infer",
                    help="without --dist: infer k1 from the lane lines' curvature and sample it in the posterior "
                         "(default), or assume a lens without distortion")
@@ -414,6 +419,8 @@ def _add_run_options(p):
                    help="side of the track the camera stands on: main (home straight stands, runner goes "
                         "left to right), far (across the infield); auto decides by evidence (default; "
                         "clip.json 'camera_side' is used when given)")
+    g.add_argument("--height-allowance", type=_nonneg_float, default=0.008, metavar="SD",
+                   help="systematic allowance on the camera height (sd of log height; default 0.008: track tolerances)")
     g.add_argument("--branch", choices=("auto", "narrow", "wide"), default="auto",
                    help="branch of the calibration family: narrow (a long lens far away: the usual broadcast "
                         "camera), wide (close by, looking down steeply); auto decides by evidence (default)")
@@ -422,8 +429,7 @@ def _add_run_options(p):
                         "to OUT.previous-<time>, never deleted (a probreg result is replaced without it)")
     if not any(a.dest == "seed" for a in p._actions):
         g.add_argument("--seed", type=int, default=0)
-    p.add_argument("--config", type=Path, default=None,
-                   help="TOML file of options (probreg config writes the default); flags override it")
+    p.add_argument("--config", type=Path, default=None, help="TOML file of options (probreg config writes the default)")
     p.add_argument("--quiet", action="store_true", help="no progress bars or stage messages (warnings stay)")
 
 
@@ -441,9 +447,8 @@ def build_parser():
     s.add_argument("--seed", type=int, default=0)
     s.add_argument("--frames", type=int, default=None, help="number of frames (default 250)")
     s.add_argument("--no-images", action="store_true", help="skip rendering frames (keypoints + ground truth only)")
-    s.add_argument("--suite", default=None,
-                   help="write a fixed clip suite: 'bench' (the benchmark suite) or 'heldout' (40 randomised "
-                        "set-ups with fixed seeds, never tuned on)")
+    s.add_argument("--suite", default=None, help="write a fixed clip suite: 'bench' (the benchmark suite) or 'heldout' "
+                   "(40 randomised set-ups with fixed seeds, never tuned on)")
     s.add_argument("--style", default=None, help="override the running style")
     s.add_argument("--camera-height", type=float, default=None, help="override camera height (m)")
     s.add_argument("--distance", type=float, default=None, help="override camera distance across the track (m)")

@@ -40,7 +40,7 @@ def _defaults():
             "draws_per_noise_copy": smp.draws_per_noise_copy,
             "seed": smp.seed, "moves": smp.moves, "camera_side": run.camera_side, "branch": run.branch,
             "min_score": run.min_score, "lens": run.lens,
-            "lens_k1_sd": run.lens_prior.sd}
+            "lens_k1_sd": run.lens_prior.sd, "height_allowance": run.height_allowance}
 
 
 _D = _defaults()
@@ -54,6 +54,9 @@ CONFIG_KEYS = (
     Key("priors", "stature_m", "stature", float, _D["stature"], "mean of the athlete's stature prior (m)"),
     Key("priors", "stature_sd", "stature_sd", float, _D["stature_sd"],
         "sd of the stature prior (m): 0.16 holds adults of 1.50-2.10 m; 0.02 when the stature is known"),
+    Key("priors", "camera_height_allowance", "height_allowance", float, _D["height_allowance"],
+        "systematic allowance on the camera height (sd of log height) for the track's lane-width and "
+        "slope tolerances; 0 takes the lane geometry as exact"),
     Key("sampler", "walkers", "walkers", int, _D["walkers"], "emcee walkers"),
     Key("sampler", "max_steps", "max_steps", int, _D["max_steps"], "sampling budget (steps after burn-in)"),
     Key("sampler", "draws", "draws", int, _D["draws"], "posterior draws propagated to angles (the bands)"),

@@ -35,6 +35,7 @@ from .calibration.registration import camera_json, register_clip
 from .calibration.side import requested_side
 from .geometry import JOINT_NAMES
 from .inference import ModelPriors, angle_bands, gait_cycle_bands, gait_intervals
+from .inference.heights import HEIGHT_SYSTEMATIC_SD
 from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationError
 from .inference.sampling import SamplerSettings
 from .inference.evidence import BRANCHES, BranchChoice, laplace_log_evidence
@@ -72,6 +73,9 @@ class RunOptions:
     # None: the calibrated bands (probreg.inference.BAND_SCALE and BAND_CURVATURE_S2); a number
     # scales the bootstrap band by it, without the curvature term (1.0: raw bootstrap bands)
     band_inflation: float | None = None
+    # systematic allowance on the camera height (sd of log height; 0: none), over which the
+    # height-only likelihood terms are marginalised (probreg.inference.heights)
+    height_allowance: float = HEIGHT_SYSTEMATIC_SD
     # progress(desc, total) -> a bar with update(n) and close() (e.g. tqdm); None: no bars
     progress: object = None
 
@@ -268,7 +272,8 @@ def _branch_candidate(clip, reg, options, given, branch):
     if options.dist is None and options.lens == "infer":
         lens, model_reg = lens_registration(reg, options.lens_prior, height_m=options.priors.camera_height.centre())
     model = ClipModel(model_reg, clip.keypoints_px, clip.fps, clip.athlete_lane, priors=options.priors,
-                      dist=options.dist, branch=branch, lens=lens)
+                      dist=options.dist, branch=branch, lens=lens,
+                      height_systematic_sd=options.height_allowance)
     return reg, side, lens, model
 
 
@@ -468,6 +473,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                                      "input_notes": list(clip.notes), **extra,
                                      "diagnostics": diag, "timings_s": timings, "height_m": height,
                                      "height_member_sensitivity": sensitivity,
+                                     "height_allowance": options.height_allowance,
                                      "lens": lens_doc, "band_decomposition": decomposition,
                                      "band_decomposition_method": DECOMPOSITION_METHOD,
                                      "frame_status": status, "noise_px": model.noise_sd,

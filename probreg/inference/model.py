@@ -138,6 +138,8 @@ class ClipModel(DrawPropagation, EmceeSampling):
                  track_weight=0.2, lens=None, height_systematic_sd=HEIGHT_SYSTEMATIC_SD):
         t0 = time.perf_counter()
         self.height_systematic_sd = float(height_systematic_sd)
+        if not (np.isfinite(self.height_systematic_sd) and self.height_systematic_sd >= 0):
+            raise ValueError(f"height_systematic_sd must be a finite number >= 0, got {height_systematic_sd!r}")
         self.reg = registration
         self.lens = lens
         if lens is not None and dist is not None and np.any(dist):

@@ -159,3 +159,32 @@ def test_detect_athlete_decodes_the_video_with_an_onnx_model(video, tmp_path):
     assert h36m.shape == (40, 17, 3) and np.isfinite(h36m[:, :, 0]).all()
     with pytest.raises(ValueError, match="x,y .* or x0,y0,x1,y1"):
         detect_athlete(load_clip(clip_dir), model, athlete=[1, 2, 3])
+
+
+def test_the_height_allowance_is_an_option_everywhere_with_one_default(tmp_path, capsys):
+    """``--height-allowance`` (CLI), ``[priors] camera_height_allowance`` (config file) and the
+    ``height_allowance`` manifest column all default to the model's constant and reach
+    RunOptions; a negative value is refused with a message that names the flag."""
+    from probreg.batch import DEFAULTS, _run_options as batch_options
+    from probreg.cli import _run_options, build_parser
+    from probreg.inference.heights import HEIGHT_SYSTEMATIC_SD
+    from probreg.pipeline import RunOptions
+
+    assert RunOptions().height_allowance == HEIGHT_SYSTEMATIC_SD
+    args = build_parser().parse_args(["run", "clip", "--out", str(tmp_path / "o")])
+    assert args.height_allowance == HEIGHT_SYSTEMATIC_SD
+    args = build_parser().parse_args(["run", "clip", "--out", str(tmp_path / "o"), "--height-allowance", "0"])
+    assert _run_options(args).height_allowance == 0.0
+    assert DEFAULTS["height_allowance"] == HEIGHT_SYSTEMATIC_SD
+    assert batch_options({**DEFAULTS, "height_allowance": 0.02}).height_allowance == 0.02
+    with pytest.raises(ValueError, match="height_allowance"):
+        batch_options({**DEFAULTS, "height_allowance": -0.01})
+    p = tmp_path / "probreg.toml"
+    p.write_text("[priors]\ncamera_height_allowance = 0.0\n")
+    assert read_config(p)["height_allowance"] == 0.0
+    with pytest.raises(SystemExit) as exc:
+        main(["run", "clip", "--out", str(tmp_path / "o"), "--height-allowance", "-1"])
+    assert exc.value.code == 2
+    err = capsys.readouterr().err
+    assert "--height-allowance" in err and "must be a finite number >= 0" in err
+    assert not (tmp_path / "o").exists()
