@@ -89,8 +89,10 @@ def smear_log_likelihood(grid, ll, sd=HEIGHT_SYSTEMATIC_SD, step=None):
     The lanes fix the height through the family's geometry; near the fold the terms become
     spikes a few tenths of a percent wide, narrower than what the geometry's own assumptions
     (flat track, exact lane width) warrant.  The convolution leaves a term broader than ``sd``
-    as it was and widens a spike to ``sd``; it keeps the term's integral (so the branches'
-    evidence is unchanged).  Heights outside the grid count as no support.
+    as it was and widens a spike to ``sd``; it keeps the term's integral, so an exact evidence
+    would not move (the branches' Laplace estimate, :mod:`probreg.inference.evidence`, can:
+    near the fold the widened terms are far from Gaussian).  Heights outside the grid count as
+    no support.
 
     >>> g = np.geomspace(5.0, 40.0, 3000)
     >>> spike = -0.5 * (np.log(g / 20.0) / 0.001) ** 2         # 0.1 % wide
