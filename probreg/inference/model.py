@@ -432,7 +432,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
                                member_jitter(cams.C[:, 1], cams.valid & (self.gap_distance == 0), dist))
             self._segment_stats(g, cams, tr)
             slides[g] = self._slides(cams, tr)
-        self.ll_static, self.static_noise_ratio = score_static(static_parts, len(self.grid), n_frames)
+        self.ll_static = score_static(static_parts, len(self.grid), n_frames)[0]
         self._score_slides(slides)
 
     def _stance_windows(self):
