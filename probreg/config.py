@@ -146,6 +146,8 @@ def _convert(path, key, value):
     if key.kind is float:
         if isinstance(value, bool) or not isinstance(value, (int, float)):
             raise ConfigError(f"{where} must be a number, got {value!r}")
+        if key.dest == "height_allowance" and not 0 <= value < float("inf"):
+            raise ConfigError(f"{where} must be a finite number >= 0, got {value!r}")
         return float(value)
     if key.kind is int:
         if isinstance(value, bool) or not isinstance(value, int):

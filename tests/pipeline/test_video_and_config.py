@@ -47,6 +47,7 @@ def test_default_config_round_trips_to_the_defaults(tmp_path):
     ("[lens]\ndist = [0.1, 0]\n", "five numbers"),
     ("[camera]\nside = 'left'\n", "'auto', 'main' or 'far'"),
     ("[priors\n", "not valid TOML"),
+    ("[priors]\ncamera_height_allowance = -0.1\n", "camera_height_allowance must be a finite number >= 0"),
 ])
 def test_bad_config_names_file_and_key(tmp_path, text, needle, capsys):
     p = tmp_path / "c.toml"
