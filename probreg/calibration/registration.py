@@ -20,6 +20,7 @@ from ..lanes import (
     FrameLanes,
     LaneDetectorConfig,
     smooth_vanishing_points,
+    line_straightness_px,
     track_lanes,
     undistort_frame_lanes,
 )
@@ -426,9 +427,12 @@ def undistorted_members(frame_lanes: FrameLanes, family, focal_px, dist, forward
         return out
     lo, hi = lf[need].min() - step, lf[need].max() + step
     anchors = np.linspace(lo, hi, max(int(np.ceil((hi - lo) / step)) + 1, 2))
-    fams = [_family_or_none(undistort_frame_lanes(frame_lanes, dist, float(np.exp(a)), spacing=False), forward_px, lane_width_m)
-            for a in anchors]
+    undone = [undistort_frame_lanes(frame_lanes, dist, float(np.exp(a)), spacing=False) for a in anchors]
+    fams = [_family_or_none(u, forward_px, lane_width_m) for u in undone]
     k = np.clip(np.searchsorted(anchors, lf) - 1, 0, len(anchors) - 2)
+    # the plumb line: a known lens straightens the lines only near the true focal length;
+    # members whose lines it leaves bent are not cameras of this lens
+    bent = _bent_members(np.array([line_straightness_px(u) for u in undone]), anchors, lf)
     # each anchor family's members on the two intervals it borders, computed once
     at_anchor = {}
     for j, fam_j in enumerate(fams):
@@ -457,7 +461,28 @@ def undistorted_members(frame_lanes: FrameLanes, family, focal_px, dist, forward
             Rm[fin] = u @ vt
         out["R"][sel] = Rm
         out["index_flipped"][sel] = np.where(w < 0.5, ma["index_flipped"], mb["index_flipped"])
+    out["valid"] &= ~bent
     return out
+
+
+def _bent_members(straightness_px, anchors, log_f, slack_px=0.5):
+    """Members (at ``log_f``) whose lines, undistorted with their own focal length, stay bent.
+
+    ``straightness_px``: :func:`probreg.lanes.undistort.line_straightness_px` of the lines
+    undistorted at the ``anchors`` (log focal lengths), interpolated linearly between them.
+    Bent means more than twice the straightest anchor's value plus ``slack_px`` (the anchors
+    are spaced too far apart to land on the straightest focal length).  NaN scores bend nothing.
+
+    >>> a = np.log([1000.0, 1500.0, 2250.0, 3375.0])
+    >>> _bent_members(np.array([30.0, 3.0, 0.3, 0.6]), a, np.log([1200.0, 1600.0, 2250.0, 3000.0]))
+    array([ True,  True, False, False])
+    """
+    s = np.asarray(straightness_px, float)
+    ok = np.isfinite(s)
+    if ok.sum() < 2:
+        return np.zeros(len(log_f), bool)
+    limit = 2.0 * float(np.min(s[ok])) + slack_px
+    return np.interp(log_f, anchors[ok], s[ok]) > limit
 
 
 def register_frames(frame_lanes, image_size, forward_px=(1.0, 0.0), lane_width_m=1.22, smooth=True):

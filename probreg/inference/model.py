@@ -161,7 +161,9 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self.max_gap_frames = 25
         self._build_branches()
         if not self.valid.any():
-            raise NoCalibrationError("no frame has a usable calibration family (no lanes found)")
+            raise NoCalibrationError(f"no frame has a usable calibration family on the {branch} branch "
+                                     "(no lanes found, or, with a lens given, none of its cameras "
+                                     "straightens the lines)")
         lo, hi = self.height_range
         plo, phi = priors.camera_height.interval(0.998)
         g_lo, g_hi = max(lo, plo), min(hi, phi)

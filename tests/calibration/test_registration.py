@@ -205,3 +205,26 @@ def test_distortion_aware_family_recovers_the_camera(distorted_lanes):
     far = grid > 200 * cam.focal_px  # the corner moves by < 0.001 px
     plain = fam.members(grid[far])
     assert np.array_equal(full["height_m"][far], plain["height_m"])
+
+
+def test_a_given_lens_straightens_the_lines_only_near_its_own_focal_length(distorted_lanes):
+    """Plumb line: lines bent by a k1 = -0.25 lens at 30 deg, undistorted with that lens at
+    a member's own focal length, are straight only near the true focal length; members well
+    away from it (their undistorted lines are bent by pixels) are not cameras of this lens."""
+    from probreg.calibration import CalibrationFamily, undistorted_members
+    from probreg.lanes import line_straightness_px, undistort_frame_lanes
+
+    dist = np.array([-0.25, 0.0, 0.0, 0.0, 0.0])
+    cam = Camera.look_at([30.0, -25.0, 7.0], [45.0, -5.0, 0.5], fov_deg=30.0, dist=dist)
+    fl = distorted_lanes(cam)
+    fwd = cam.project(np.array([[50.0, -3.0, 0.0]]))[0] - cam.project(np.array([[40.0, -3.0, 0.0]]))[0]
+    fwd = fwd / np.linalg.norm(fwd)
+    fam = CalibrationFamily.from_frame_lanes(fl, forward_px=fwd, lane_width_m=1.22)
+    ratios = np.array([0.5, 0.97, 1.0, 1.03])
+    m = undistorted_members(fl, fam, cam.focal_px * ratios, dist, forward_px=fwd)
+    bend = [line_straightness_px(undistort_frame_lanes(fl, dist, cam.focal_px * r, spacing=False))
+            for r in ratios]
+    assert bend[0] > 2.0 and max(bend[1:]) < 0.5  # the premise: over-corrected lines bend by pixels
+    assert not m["valid"][0]
+    assert m["valid"][1:].all()
+    assert abs(m["height_m"][2] / cam.C[2] - 1) < 0.002
