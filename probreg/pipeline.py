@@ -40,7 +40,7 @@ from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationErro
 from .inference.sampling import SamplerSettings
 from .inference.evidence import BRANCHES, BranchChoice, laplace_log_evidence
 from .inference.verdict import bone_length_cv, clip_verdict
-from .inference.parallel import fork_call
+from .inference.parallel import default_workers, fork_call
 from .io.clip import ClipFormatError, load_clip, write_json
 from .io.frames import has_frames
 from .io.output import atomic_output_dir, prepare_output
@@ -374,11 +374,13 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         raise ValueError(f"{clip_dir}: only {seen} frames have a detected athlete (at least 8 joints); "
                          f"the model needs at least 10")
     given = requested_side(options.camera_side, clip.meta, clip.path / "clip.json")
-    warm = _warm_imports()
-    reg = register_clip(clip, progress=options.progress)
+    warm = []
+    reg = register_clip(clip, progress=options.progress, started=lambda: warm.append(_warm_imports()),
+                        background=fork_call if default_workers() >= 2 else None)
     t1 = time.perf_counter()
     log(f"lanes: {reg.status_counts()} ({t1 - t0:.1f} s)")
-    warm.join()  # before the branch evidence forks
+    for thread in warm:
+        thread.join()  # before the branch evidence forks
     try:
         reg, side, lens, model, branch = _branch_models(clip, reg, options, given, log)
     except NoCalibrationError as exc:

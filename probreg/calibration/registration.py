@@ -15,7 +15,6 @@ import numpy as np
 
 from ..geometry import JOINT_INDEX, Camera, distort_normalized
 from ..io.clip import Clip
-from ..io.frames import iter_frames_counted
 from ..lanes import (
     FrameLanes,
     LaneDetectorConfig,
@@ -494,8 +493,13 @@ def register_frames(frame_lanes, image_size, forward_px=(1.0, 0.0), lane_width_m
                             image_size=tuple(image_size), lane_width_m=lane_width_m)
 
 
+#: clips with at least this many frames (in an image folder) follow their lanes in two halves,
+#: the second on a forked process, when two cores are there (:func:`register_clip`)
+SPLIT_MIN_FRAMES = 60
+
+
 def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(), smooth=True,
-                  mask_athlete=True, progress=None):
+                  mask_athlete=True, progress=None, background=None, started=None):
     """Detect lanes in every frame of a clip and build the per-frame families.
 
     With ``mask_athlete`` and the clip's keypoints, line evidence near the athlete is
@@ -503,17 +507,45 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
     ``bad_image``, frames whose image file is missing ``missing_image``; nothing raises for
     bad content.  ``progress(desc, total)``, when given, makes a progress bar (``update(n)``,
     ``close()``; e.g. ``tqdm``) that counts the frames.
+
+    With ``background`` (a function that starts ``work()`` elsewhere and returns a function
+    waiting for its result, e.g. :func:`probreg.inference.parallel.fork_call`), a clip of
+    :data:`SPLIT_MIN_FRAMES` frames or more in an image folder is followed in two halves: the
+    second half in the background, from a full detection at its first frame, its line
+    identities then continued from the first half's (:func:`probreg.lanes.tracking.stitch_tracks`).
+    ``started()``, when given, is called once the background work is started (threads must
+    start only then: a fork while another thread holds an import lock could hang).
     """
+    from ..io.frames import iter_frames
+    from ..lanes.tracking import stitch_tracks
+
     kp = clip.keypoints_px if mask_athlete else None
     missing = set(clip.missing_images)
-    frames = iter_frames_counted(clip, progress, "lanes")
+    n = clip.n_frames
+    mid = n // 2 if background is not None and clip.frame_paths and n >= SPLIT_MIN_FRAMES else n
+    second = background(lambda: track_lanes(iter_frames(clip, start=mid), config, keypoints_px=kp)) \
+        if mid < n else None
+    if started is not None:
+        started()
+    bar = progress("lanes", n) if progress is not None else None
+    frames = iter_frames(clip, mid)
     try:
-        fls = [replace(fl, image_size=clip.image_size,
-                       status="missing_image" if fl.frame in missing or i in missing else fl.status)
-               if fl.status == "bad_image" else fl
-               for i, fl in enumerate(track_lanes(frames, config, keypoints_px=kp))]
+        fls = []
+        for fl in track_lanes(frames, config, keypoints_px=kp):
+            fls.append(fl)
+            if bar is not None:
+                bar.update(1)
+        if second is not None:
+            fls += stitch_tracks(fls, second())
+            if bar is not None:
+                bar.update(n - mid)
     finally:
-        frames.close()  # the progress bar
+        frames.close()
+        if bar is not None:
+            bar.close()
+    fls = [replace(fl, image_size=clip.image_size,
+                   status="missing_image" if fl.frame in missing or i in missing else fl.status)
+           if fl.status == "bad_image" else fl for i, fl in enumerate(fls)]
     return register_frames(fls, clip.image_size, (1.0, 0.0), clip.lane_width_m, smooth=smooth)
 
 

@@ -24,8 +24,8 @@ def _imread(path):
 PREFETCH = 4
 
 
-def _prefetched(paths, n):
-    """``(i, image or None)`` for ``i < n``, decoded on a background thread while the caller
+def _prefetched(paths, n, start=0):
+    """``(i, image or None)`` for ``start <= i < n``, decoded on a background thread while the caller
     works on the previous frames (OpenCV releases the GIL while it decodes, so decoding, a
     third of the lane step's time at 1080p, overlaps the lane measurement).  The same images
     in the same order as decoding them one by one."""
@@ -35,13 +35,13 @@ def _prefetched(paths, n):
     paths = list(paths)[:n]
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="probreg-decode") as pool:
         pending = deque()
-        for i in range(n):
+        for i in range(start, n):
             pending.append(pool.submit(_imread, paths[i]) if i < len(paths) else None)
             if len(pending) > PREFETCH:
                 j = i - PREFETCH
                 fut = pending.popleft()
                 yield j, (fut.result() if fut is not None else None)
-        for j in range(n - len(pending), n):
+        for j in range(max(n - len(pending), start), n):
             fut = pending.popleft()
             yield j, (fut.result() if fut is not None else None)
 
@@ -63,8 +63,9 @@ def read_frame(clip: Clip, index):
     return None
 
 
-def iter_frames(clip: Clip, n_frames=None):
-    """Yield ``(index, image or None)`` for every frame of the clip (``None``: missing or unreadable).
+def iter_frames(clip: Clip, n_frames=None, start=0):
+    """Yield ``(index, image or None)`` for every frame of the clip (``None``: missing or
+    unreadable), from frame ``start`` on (image folders only; a video is read from its start).
 
     Raises
     ------
@@ -73,8 +74,10 @@ def iter_frames(clip: Clip, n_frames=None):
     """
     n = clip.n_frames if n_frames is None else n_frames
     if clip.frame_paths:
-        yield from _prefetched(clip.frame_paths, n)
+        yield from _prefetched(clip.frame_paths, n, start)
         return
+    if start:
+        raise ValueError("a video is read from its first frame")
     if clip.video_path is None:
         raise ClipFormatError(f"{Path(clip.path)}: no frames/ folder and no video.mp4")
     cap = cv2.VideoCapture(str(clip.video_path))

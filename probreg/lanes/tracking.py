@@ -22,7 +22,7 @@ from .detection import (
 from .mask import athlete_mask
 from .types import FrameLanes, LaneDetectorConfig
 
-__all__ = ["track_lanes"]
+__all__ = ["track_lanes", "stitch_tracks"]
 
 
 def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypoints_px=None):
@@ -164,3 +164,39 @@ def _assign_track_ids(fl, ref, next_id, shift=(0.0, 0.0)):
             next_id += 1
     lines = tuple(replace(ln, track_id=i) for ln, i in zip(fl.lines, ids))
     return replace(fl, lines=lines), next_id
+
+
+def stitch_tracks(first, second):
+    """``second`` (the lanes of the frames after ``first``, followed on their own) with its
+    line identities continuing those of ``first``: the first calibrated frame of ``second`` is
+    matched to the last one of ``first`` as consecutive frames are (:func:`_assign_track_ids`),
+    lines new there (or in later frames) get ids ``first`` does not use.
+
+    >>> from probreg.lanes import FrameLanes, LaneLine
+    >>> def frame(ids, y0=0.0):
+    ...     lines = tuple(LaneLine(np.array([0.0, 1.0, -(y0 + 100.0 * k)]),
+    ...                            np.array([[x, y0 + 100.0 * k] for x in range(0, 500, 50)]), 0.1, track_id=i)
+    ...                   for k, i in enumerate(ids))
+    ...     return FrameLanes(status="ok", lines=lines)
+    >>> out = stitch_tracks([frame([0, 1, 2])], [frame([0, 1, 2], y0=100.0), frame([0, 1, 2, 3], y0=100.0)])
+    >>> [[ln.track_id for ln in fl.lines] for fl in out]
+    [[1, 2, 3], [1, 2, 3, 4]]
+    """
+    used = [ln.track_id for fl in first for ln in fl.lines if ln.track_id is not None]
+    next_id = max(used, default=-1) + 1
+    ref = next((fl for fl in reversed(first) if fl.ok), None)
+    head = next((fl for fl in second if fl.ok), None)
+    mapping = {}
+    if head is not None:
+        matched, next_id = _assign_track_ids(head, ref, next_id)
+        mapping = {a.track_id: b.track_id for a, b in zip(head.lines, matched.lines)}
+    out = []
+    for fl in second:
+        lines = []
+        for ln in fl.lines:
+            if ln.track_id is not None and ln.track_id not in mapping:
+                mapping[ln.track_id] = next_id
+                next_id += 1
+            lines.append(replace(ln, track_id=mapping.get(ln.track_id)))
+        out.append(replace(fl, lines=tuple(lines)) if fl.lines else fl)
+    return out
