@@ -61,12 +61,12 @@ from ..calibration.registration import (
     lane_anchor_shift,
 )
 from ..filtering import clean_keypoints, noise_model, stride_lags
-from ..geometry import JOINT_INDEX
+from ..geometry import JOINT_INDEX, SEGMENT_BONES
 from ..geometry.rays import CameraArrays, _as_list
 from ..lifting import LiftConfig
 from ..lifting.trajectory import _runs, fit_ground_track
 from .bands import stance_window
-from .heights import HEIGHT_SYSTEMATIC_SD, height_grid, smear_log_likelihood
+from .heights import HEIGHT_SYSTEMATIC_SD, height_grid, limb_consistency, smear_log_likelihood
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
 from .parallel import default_workers, fork_map
 from .propagation import DrawPropagation
@@ -126,16 +126,16 @@ class ClipModel(DrawPropagation, EmceeSampling):
     height_systematic_sd : float
         Systematic allowance (sd of log height) over which the height-only terms are
         marginalised (:data:`probreg.inference.heights.HEIGHT_SYSTEMATIC_SD`; 0 turns it off).
+    limb_consistency_weight : float
+        Weight of :func:`probreg.inference.heights.limb_consistency` (0 turns it off).
 
-    Raises
-    ------
-    ValueError
-        If no frame has lanes, or no height of the prior's range gives cameras.
+    Raises ``ValueError`` if no frame has lanes, or no height of the prior's range gives cameras.
     """
 
     def __init__(self, registration: ClipRegistration, keypoints_px, fps, athlete_lane=None,
                  priors: ModelPriors = ModelPriors(), dist=None, n_grid=36, branch="narrow",
-                 track_weight=0.2, lens=None, height_systematic_sd=HEIGHT_SYSTEMATIC_SD):
+                 track_weight=0.2, lens=None, height_systematic_sd=HEIGHT_SYSTEMATIC_SD,
+                 limb_consistency_weight=1.0):
         t0 = time.perf_counter()
         self.height_systematic_sd = float(height_systematic_sd)
         if not (np.isfinite(self.height_systematic_sd) and self.height_systematic_sd >= 0):
@@ -158,6 +158,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self.stride_lag = stride_lags(self.kp, self.fps) if noisy else None
         self.branch = branch
         self.track_weight = float(track_weight)
+        self.limb_consistency_weight = float(limb_consistency_weight)
         self.max_gap_frames = 25
         self._build_branches()
         if not self.valid.any():
@@ -397,6 +398,10 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self.ll_track = np.full(G, -np.inf)
         self.seg_obs = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
         self.seg_se = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
+        self.seg_spread = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
+        J, fin = JOINT_INDEX, np.isfinite(self.kp[..., 0])
+        self.seg_count = {s: int(sum(np.sum(fin[:, J[a]] & fin[:, J[b]]) for a, b in SEGMENT_BONES[s]))
+                          for s in OBSERVED_SEGMENTS}
         # contacts are detected once (reference height) so every hypothesis is scored on the
         # same measurements; the filter's noise scales with the hypothesis (scale ~ height)
         ref = fit_ground_track(self.cameras_at(self.h_ref), self.kp, self.fps)
@@ -435,6 +440,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
             self._segment_stats(g, cams, tr)
             slides[g] = self._slides(cams, tr)
         self.ll_static = score_static(static_parts, len(self.grid), n_frames)[0]
+        self.ll_limbs = limb_consistency(self.seg_spread, self.seg_count) * self.limb_consistency_weight
         self._score_slides(slides)
 
     def _stance_windows(self):
@@ -518,7 +524,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
                                           float(np.hypot(base.contact_std_m[1], across))))
 
     def _segment_stats(self, g, cams, tr):
-        from ..geometry import SEGMENT_BONES, pixel_rays
+        from ..geometry import pixel_rays
         from ..lifting.raycast import _plane_hits
 
         J = JOINT_INDEX
@@ -541,6 +547,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
             n_eff = max(len(lens) / 10.0, 1.0)  # frames are strongly correlated
             self.seg_obs[s][g] = obs
             self.seg_se[s][g] = float(np.hypot(mad / np.sqrt(n_eff), 0.02 * obs))
+            self.seg_spread[s][g] = mad / max(float(np.median(lens)), 1e-9)
 
     def _interp(self, arr, log_h):
         return np.interp(log_h, np.log(self.grid), arr, left=np.nan, right=np.nan)
@@ -572,7 +579,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
         key = (self.track_weight, self._precompute_id)
         if getattr(self, "_height_cache", (None,))[0] != key:
             with np.errstate(invalid="ignore"):
-                ll = self.track_weight * self.ll_track + self.ll_static + self.ll_still
+                ll = self.track_weight * self.ll_track + self.ll_static + self.ll_still + self.ll_limbs
             self._height_cache = (key, smear_log_likelihood(self.grid, ll, self.height_systematic_sd))
         return self._height_cache[1]
 
