@@ -511,8 +511,9 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
     With ``background`` (a function that starts ``work()`` elsewhere and returns a function
     waiting for its result, e.g. :func:`probreg.inference.parallel.fork_call`), a clip of
     :data:`SPLIT_MIN_FRAMES` frames or more in an image folder is followed in two halves: the
-    second half in the background, from a full detection at its first frame, its line
-    identities then continued from the first half's (:func:`probreg.lanes.tracking.stitch_tracks`).
+    second half in the background, from its first frame, one the single pass would detect in
+    full too (so every frame is measured as in one pass), its line identities then continued
+    from the first half's (:func:`probreg.lanes.tracking.stitch_tracks`).
     ``started()``, when given, is called once the background work is started (threads must
     start only then: a fork while another thread holds an import lock could hang).
     """
@@ -522,7 +523,11 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
     kp = clip.keypoints_px if mask_athlete else None
     missing = set(clip.missing_images)
     n = clip.n_frames
-    mid = n // 2 if background is not None and clip.frame_paths and n >= SPLIT_MIN_FRAMES else n
+    # the second half starts on a frame the one pass would detect in full anyway (every
+    # ``redetect_every``-th): both halves then measure every frame as the one pass does
+    step = max(int(config.redetect_every), 1)
+    mid = (n // 2) // step * step if background is not None and clip.frame_paths and n >= SPLIT_MIN_FRAMES else n
+    mid = mid if 0 < mid < n else n
     second = background(lambda: track_lanes(iter_frames(clip, start=mid), config, keypoints_px=kp)) \
         if mid < n else None
     if started is not None:

@@ -231,9 +231,9 @@ def test_a_given_lens_straightens_the_lines_only_near_its_own_focal_length(disto
 
 
 def test_lanes_followed_in_two_halves_match_the_lanes_followed_in_one(small_clip, monkeypatch):
-    """With a background worker the clip's second half is followed on its own: the same
-    statuses, the same line identities across the seam, families within noise of one pass;
-    ``started`` runs once the background work is under way."""
+    """With a background worker the clip's second half is followed on its own, from a frame
+    the one pass detects in full too: the same statuses, the same lines (to a thousandth of a pixel), the same
+    line identities across the seam; ``started`` runs once the background work is under way."""
     import probreg.calibration.registration as registration
     from probreg.inference.parallel import fork_call
 
@@ -244,12 +244,12 @@ def test_lanes_followed_in_two_halves_match_the_lanes_followed_in_one(small_clip
     two = register_clip(clip, background=fork_call, started=lambda: calls.append(1))
     assert calls == [1]
     assert [fl.status for fl in one.frame_lanes] == [fl.status for fl in two.frame_lanes]
-    mid = clip.n_frames // 2
-    for i in range(mid - 2, clip.n_frames):
-        a, b = one.frame_lanes[i], two.frame_lanes[i]
-        if a.ok and b.ok and len(a.lines) == len(b.lines):
-            assert [ln.track_id for ln in a.lines] == [ln.track_id for ln in b.lines], i
+    for i, (a, b) in enumerate(zip(one.frame_lanes, two.frame_lanes)):
+        assert [ln.track_id for ln in a.lines] == [ln.track_id for ln in b.lines], i
+        for la, lb in zip(a.lines, b.lines):
+            assert np.allclose(la.line / np.linalg.norm(la.line[:2]), lb.line / np.linalg.norm(lb.line[:2]),
+                               atol=1e-3), i  # px: rounding in the forked process
     f = np.array([2500.0])
     rel = [abs(x.members(f)["height_m"][0] / y.members(f)["height_m"][0] - 1)
            for x, y in zip(one.sequence.families, two.sequence.families) if x is not None and y is not None]
-    assert len(rel) > 30 and np.nanmax(rel) < 0.01
+    assert len(rel) > 30 and np.nanmax(rel) < 1e-3
