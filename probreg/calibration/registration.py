@@ -493,9 +493,12 @@ def register_frames(frame_lanes, image_size, forward_px=(1.0, 0.0), lane_width_m
                             image_size=tuple(image_size), lane_width_m=lane_width_m)
 
 
-#: clips with at least this many frames (in an image folder) follow their lanes in two halves,
+#: clips with at least this many frames (in an image folder) follow their lanes in two parts,
 #: the second on a forked process, when two cores are there (:func:`register_clip`)
 SPLIT_MIN_FRAMES = 60
+#: the share of the frames the calling process follows itself when a clip is split (less than
+#: half: it also runs the import warm-up of :func:`probreg.pipeline.run_clip` meanwhile)
+SPLIT_SHARE = 0.45
 
 
 def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(), smooth=True,
@@ -510,10 +513,10 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
 
     With ``background`` (a function that starts ``work()`` elsewhere and returns a function
     waiting for its result, e.g. :func:`probreg.inference.parallel.fork_call`), a clip of
-    :data:`SPLIT_MIN_FRAMES` frames or more in an image folder is followed in two halves: the
-    second half in the background, from its first frame, one the single pass would detect in
-    full too (so every frame is measured as in one pass), its line identities then continued
-    from the first half's (:func:`probreg.lanes.tracking.stitch_tracks`).
+    :data:`SPLIT_MIN_FRAMES` frames or more in an image folder is followed in two parts, the
+    first :data:`SPLIT_SHARE` of it here, the rest in the background from a frame the single
+    pass would detect in full too (so every frame is measured as in one pass), its line
+    identities then continued from the first part's (:func:`probreg.lanes.tracking.stitch_tracks`).
     ``started()``, when given, is called once the background work is started (threads must
     start only then: a fork while another thread holds an import lock could hang).
     """
@@ -523,10 +526,11 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
     kp = clip.keypoints_px if mask_athlete else None
     missing = set(clip.missing_images)
     n = clip.n_frames
-    # the second half starts on a frame the one pass would detect in full anyway (every
-    # ``redetect_every``-th): both halves then measure every frame as the one pass does
+    # the second part starts on a frame the one pass would detect in full anyway (every
+    # ``redetect_every``-th): both parts then measure every frame as the one pass does
     step = max(int(config.redetect_every), 1)
-    mid = (n // 2) // step * step if background is not None and clip.frame_paths and n >= SPLIT_MIN_FRAMES else n
+    mid = int(n * SPLIT_SHARE) // step * step if background is not None and clip.frame_paths \
+        and n >= SPLIT_MIN_FRAMES else n
     mid = mid if 0 < mid < n else n
     second = background(lambda: track_lanes(iter_frames(clip, start=mid), config, keypoints_px=kp)) \
         if mid < n else None

@@ -162,9 +162,11 @@ def test_lens_none_is_recorded_and_the_keypoint_share_follows_the_detector_noise
         dec = json.loads((tmp_path / name / "run.json").read_text())["band_decomposition"]
         assert dec["knee_l"]["lens"] == 0.0
         kp_share[name] = np.mean([dec[a]["keypoints"] for a in ("knee_l", "knee_r", "hip_l", "hip_r")])
-    # exact keypoints: little of the band is detector noise (the noise model still reads ~0.5 px
-    # from the rendered motion itself); with the generator's detector noise (~5 px) much more
-    assert kp_share["exact"] < 0.15 and kp_share["noisy"] > 2 * kp_share["exact"]
+    # exact keypoints: a minor part of the band is detector noise (the noise model still reads
+    # ~0.5 px from the rendered motion itself, and with exact limbs the limb consistency term
+    # pins the camera, so the other parts are small too: 0.25 here, 0.03-0.09 without that term);
+    # with the generator's detector noise (~5 px) the keypoints dominate (~0.6)
+    assert kp_share["exact"] < 0.35 and kp_share["noisy"] > 2 * kp_share["exact"]
     with pytest.raises(ValueError, match="lens must be"):
         run_clip(noisy_wide_lens_clip, tmp_path / "bad", RunOptions(sampler=fast, report=False, lens="guess"),
                  log=lambda *a: None)

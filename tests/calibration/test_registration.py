@@ -230,8 +230,8 @@ def test_a_given_lens_straightens_the_lines_only_near_its_own_focal_length(disto
     assert abs(m["height_m"][2] / cam.C[2] - 1) < 0.002
 
 
-def test_lanes_followed_in_two_halves_match_the_lanes_followed_in_one(small_clip, monkeypatch):
-    """With a background worker the clip's second half is followed on its own, from a frame
+def test_lanes_followed_in_two_parts_match_the_lanes_followed_in_one(small_clip, monkeypatch):
+    """With a background worker the clip's second part is followed on its own, from a frame
     the one pass detects in full too: the same statuses, the same lines (to a thousandth of a pixel), the same
     line identities across the seam; ``started`` runs once the background work is under way."""
     import probreg.calibration.registration as registration
