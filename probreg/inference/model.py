@@ -118,16 +118,16 @@ class ClipModel(DrawPropagation, EmceeSampling):
         becomes the last parameter of the posterior (prior: ``lens.prior``; likelihood: the
         plumb-line evidence at ``k1 (r_ref / f_ref(h))**2``).
     n_grid : int
-        Heights on which the height-dependent statistics are precomputed.
+        Heights (geometric) of the precomputed height-dependent statistics.
     track_weight : float
         Weight of the ground-track filter's (per-contact) log-likelihood.  Its
         absolute values depend on unmodelled effects (foot placement, detector
         noise in depth), so it enters damped; 1 uses it at face value.
     height_systematic_sd : float
-        Systematic allowance (sd of log height) over which the height-only terms are
-        marginalised (:data:`probreg.inference.heights.HEIGHT_SYSTEMATIC_SD`; 0 turns it off).
+        Systematic allowance (sd of log height) of the height-only terms (0: off; the default
+        :data:`probreg.inference.heights.HEIGHT_SYSTEMATIC_SD`).
     limb_consistency_weight : float
-        Weight of :func:`probreg.inference.heights.limb_consistency` (0 turns it off).
+        Weight of :func:`probreg.inference.heights.limb_consistency` (0: off).
 
     Raises ``ValueError`` if no frame has lanes, or no height of the prior's range gives cameras.
     """
@@ -398,7 +398,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self.ll_track = np.full(G, -np.inf)
         self.seg_obs = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
         self.seg_se = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
-        self.seg_spread = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
+        self.seg_spread, self.seg_measured = ({s: np.full(G, v) for s in OBSERVED_SEGMENTS} for v in (np.nan, 0.0))
         J, fin = JOINT_INDEX, np.isfinite(self.kp[..., 0])
         self.seg_count = {s: int(sum(np.sum(fin[:, J[a]] & fin[:, J[b]]) for a, b in SEGMENT_BONES[s]))
                           for s in OBSERVED_SEGMENTS}
@@ -440,12 +440,12 @@ class ClipModel(DrawPropagation, EmceeSampling):
             self._segment_stats(g, cams, tr)
             slides[g] = self._slides(cams, tr)
         self.ll_static = score_static(static_parts, len(self.grid), n_frames)[0]
-        self.ll_limbs = limb_consistency(self.seg_spread, self.seg_count) * self.limb_consistency_weight
+        self.ll_limbs = self.limb_consistency_weight * limb_consistency(self.seg_spread, self.seg_count,
+                                                                        measured=self.seg_measured)
         self._score_slides(slides)
 
     def _stance_windows(self):
-        """``(side, first, n)``: the foot-flat part of every whole contact
-        (fractions :data:`STANCE_WINDOW` of the detected contact)."""
+        """``(side, first, n)``: the foot-flat part of every whole contact (:data:`STANCE_WINDOW`)."""
         return [(side, *stance_window(a, b)) for side in (0, 1) for a, b in _runs(self.contacts[:, side])
                 if a > 0 and b < self.F and b - a >= 3]  # a contact cut by the clip has no known phase
 
@@ -547,7 +547,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
             n_eff = max(len(lens) / 10.0, 1.0)  # frames are strongly correlated
             self.seg_obs[s][g] = obs
             self.seg_se[s][g] = float(np.hypot(mad / np.sqrt(n_eff), 0.02 * obs))
-            self.seg_spread[s][g] = mad / max(float(np.median(lens)), 1e-9)
+            self.seg_spread[s][g], self.seg_measured[s][g] = mad / max(float(np.median(lens)), 1e-9), len(lens)
 
     def _interp(self, arr, log_h):
         return np.interp(log_h, np.log(self.grid), arr, left=np.nan, right=np.nan)
