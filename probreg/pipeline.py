@@ -24,7 +24,7 @@ image, their count per frame (``keypoints_outside_image``).
 from __future__ import annotations
 
 import time
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 
 import numpy as np
@@ -196,13 +196,14 @@ DECOMPOSITION_METHOD = (
 def _lens_summary(options, lens, flat):
     """The lens of a run for ``camera.json`` (``k1``: median and 90 % interval) and ``run.json``:
     inferred (the posterior's ``k1`` draws), given (``--dist``) or assumed free of distortion."""
-    if lens is not None:
+    if lens is not None and lens.given_k1 is None:
         k1 = flat[:, -1]
         lo, med, hi = np.percentile(k1, [5, 50, 95])
         return {"source": "inferred", "median": float(med), "lo": float(lo), "hi": float(hi),
                 "prior_interval": list(options.lens_prior.interval(0.9)), **lens.to_dict()}
     k1 = float(options.dist[0]) if options.dist is not None else 0.0
-    return {"source": "given" if options.dist is not None else "assumed", "median": k1, "lo": k1, "hi": k1}
+    return {"source": "given" if options.dist is not None else "assumed", "median": k1, "lo": k1, "hi": k1,
+            **(lens.to_dict() if lens is not None else {})}
 
 
 def _frame_status(lanes, camera, inconsistent, gap_distance):
@@ -268,11 +269,17 @@ def _write_uncalibrated(clip, reg, side, out_dir, options, message, t0, log, inp
 def _branch_candidate(clip, reg, options, given, branch):
     """One branch's ``(registration, side, lens, model)`` (raises :class:`NoCalibrationError`)."""
     side = reg.orient(options.priors.camera_height.centre(), clip.keypoints_px, branch, fps=clip.fps, given=given)
-    lens, model_reg = None, reg
-    if options.dist is None and options.lens == "infer":
+    lens, model_reg, dist = None, reg, options.dist
+    k1_only = dist is not None and dist[0] != 0 and not np.any(np.asarray(dist, float)[1:])
+    if (dist is None and options.lens == "infer") or k1_only:
+        # the lines are undistorted at their own best fit (the default prior); a given k1 then
+        # enters the posterior as a sharp prior, and the plumb-line evidence ties it to the
+        # focal length, i.e. to the camera height (the same path as an inferred lens)
         lens, model_reg = lens_registration(reg, options.lens_prior, height_m=options.priors.camera_height.centre())
+        if k1_only and lens is not None:
+            lens, dist = replace(lens, prior=LensPrior.given(dist[0]), given_k1=float(dist[0])), None
     model = ClipModel(model_reg, clip.keypoints_px, clip.fps, clip.athlete_lane, priors=options.priors,
-                      dist=options.dist, branch=branch, lens=lens,
+                      dist=dist, branch=branch, lens=lens,
                       height_systematic_sd=options.height_allowance)
     return reg, side, lens, model
 
@@ -333,7 +340,8 @@ def _branch_models(clip, reg, options, given, log):
     log(f"family branch: {choice.chosen} ({choice.source}"
         + (f"; log-evidence ratio {choice.log_ratio:.1f}" if np.isfinite(choice.log_ratio) else "") + ")")
     if lens is not None:
-        log(f"lens: k1 from the lane lines (corner shift {lens.kappa_star * lens.evidence.r_ref:+.2f} px "
+        log(("lens: k1 given, the lines undistorted at their own best fit" if lens.given_k1 is not None
+             else "lens: k1 from the lane lines") + f" (corner shift {lens.kappa_star * lens.evidence.r_ref:+.2f} px "
             f"at the best fit; {lens.evidence.n_frames} frames, {lens.evidence.n_lines} lines)")
     return r, side, lens, model, choice
 

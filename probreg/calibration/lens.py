@@ -43,8 +43,8 @@ __all__ = ["LensPrior", "LensEvidence", "LensModel", "plumb_line_evidence", "inf
 
 @dataclass(frozen=True)
 class LensPrior:
-    """Weakly informative prior of a broadcast lens's ``k1``: normal, mean 0, sd ``sd``,
-    truncated to ``|k1| <= limit``.
+    """Weakly informative prior of a broadcast lens's ``k1``: normal, mean ``mean`` (0), sd
+    ``sd``, truncated to ``|k1| <= limit``.
 
     Broadcast zoom lenses at their wide end show ``|k1|`` of about 0.1-0.25 (barrel or
     pincushion), at their long end almost none; sd 0.15 gives those values prior
@@ -58,21 +58,41 @@ class LensPrior:
 
     sd: float = 0.15
     limit: float = 0.5
+    mean: float = 0.0
 
     def __post_init__(self):
         if not (np.isfinite(self.sd) and self.sd > 0 and np.isfinite(self.limit) and self.limit > 0):
             raise ValueError(f"the k1 prior needs a positive sd and limit, got sd={self.sd}, limit={self.limit}")
+        if not (np.isfinite(self.mean) and abs(self.mean) <= self.limit):
+            raise ValueError(f"the k1 prior's mean must be finite and within +-{self.limit}, got {self.mean}")
+
+    @classmethod
+    def given(cls, k1, sd=None):
+        """The prior of a lens the user gives (``--dist``): sharp at ``k1`` (sd
+        :data:`GIVEN_K1_SD`, a lens calibrated on a chart), truncated at ``max(0.5, 2 |k1|)``.
+
+        >>> p = LensPrior.given(-0.2)
+        >>> p.interval(0.9)[0] < -0.2 < p.interval(0.9)[1], round(p.interval(0.9)[1] - p.interval(0.9)[0], 4)
+        (True, 0.0066)
+        """
+        k1 = float(k1)
+        return cls(sd=GIVEN_K1_SD if sd is None else float(sd), limit=max(0.5, 2.0 * abs(k1)), mean=k1)
 
     def logpdf(self, k1):
         k1 = np.asarray(k1, float)
-        out = -0.5 * (k1 / self.sd) ** 2 - np.log(self.sd * np.sqrt(2 * np.pi))
+        out = -0.5 * ((k1 - self.mean) / self.sd) ** 2 - np.log(self.sd * np.sqrt(2 * np.pi))
         return np.where(np.abs(k1) <= self.limit, out, -np.inf)
 
     def interval(self, p=0.9):
         from scipy.stats import norm
 
         z = float(norm.ppf(0.5 + p / 2))
-        return -min(z * self.sd, self.limit), min(z * self.sd, self.limit)
+        return max(self.mean - z * self.sd, -self.limit), min(self.mean + z * self.sd, self.limit)
+
+
+#: sd of the prior of a given ``k1`` (:meth:`LensPrior.given`): a lens calibrated on a chart
+#: is known to a few thousandths
+GIVEN_K1_SD = 0.002
 
 
 def reference_radius(image_size):
@@ -362,9 +382,25 @@ class LensModel:
     prior: LensPrior
     kappa_star: float
     focal_ref_px: float  # of the distorted lines' family at the prior's centre height
+    # the k1 the user gave (``--dist``; the prior is then :meth:`LensPrior.given`), else None
+    given_k1: float | None = None
+
+    def camera_k1(self, focal_px):
+        """The OpenCV ``k1`` of cameras with these per-frame focal lengths: the given one, or
+        that of the lines' undistortion (``kappa_star / zoom_i**2`` per frame; one value per
+        clip, the zoom ratios cancel; 0 when no frame has a camera)."""
+        if self.given_k1 is not None:
+            return float(self.given_k1)
+        f = np.asarray(focal_px, float)
+        ok = np.isfinite(f)
+        if not ok.any():
+            return 0.0
+        k1 = float(np.median(self.evidence.k1_of(self.kappa_star, f[ok] / self.evidence.zoom[ok])))
+        return k1 if np.isfinite(k1) else 0.0
 
     def to_dict(self):
         return {"kappa_star": self.kappa_star, "corner_shift_px": self.kappa_star * self.evidence.r_ref,
+                "given_k1": self.given_k1,
                 "prior_sd": self.prior.sd, "prior_limit": self.prior.limit,
                 "informative": self.evidence.informative(self.prior, self.focal_ref_px),
                 **self.evidence.to_dict()}

@@ -354,12 +354,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
         C = np.column_stack([np.zeros(F), y, np.full(F, height_m)])
         C[~valid] = np.nan
         if self.lens is not None:
-            # the lines were undistorted in pixels (kappa_star / zoom_i**2 per frame); the
-            # OpenCV k1 of that at these focal lengths (one per clip: the zoom ratios cancel)
-            ev = self.lens.evidence
-            with np.errstate(invalid="ignore"):
-                k1 = np.nanmedian(ev.k1_of(self.lens.kappa_star, f / ev.zoom)) if valid.any() else 0.0
-            dist = np.array([k1 if np.isfinite(k1) else 0.0, 0.0, 0.0, 0.0, 0.0])
+            dist = np.array([self.lens.camera_k1(f if valid.any() else f * np.nan), 0.0, 0.0, 0.0, 0.0])
         else:
             dist = np.zeros(5) if self.dist is None else self.dist
         return CameraArrays(valid=valid, C=C, R=R, focal_px=f, principal_px=self.pp, dist=dist)
@@ -637,8 +632,10 @@ class ClipModel(DrawPropagation, EmceeSampling):
             base[1] = obs
         step = np.log(self.grid[1] / self.grid[0]) if len(self.grid) > 1 else 0.05
         scale = np.r_[step, 0.02, np.full(len(SEGMENTS), 0.02)]
-        if self.lens is not None:
-            scale = np.r_[scale, 0.002 + 0.01 * abs(base[-1])]
+        if self.lens is not None:  # a sharp prior (a given lens): start at its mean
+            sharp = self.lens.prior.sd < 0.002 + 0.01 * abs(base[-1])
+            base[-1] = self.lens.prior.mean if sharp else base[-1]
+            scale = np.r_[scale, self.lens.prior.sd if sharp else 0.002 + 0.01 * abs(base[-1])]
         p0 = base + rng.normal(0, 1, (n, len(base))) * scale
         # every walker must start where the posterior is positive
         for _ in range(50):
