@@ -226,7 +226,7 @@ def _copy_extra(tmp, extra_files):
         (tmp / name).write_bytes(Path(src).read_bytes())
 
 
-def _write_uncalibrated(clip, reg, side, out_dir, options, message, t0, log, inputs, extra_files=None):
+def _write_uncalibrated(clip, reg, side, out_dir, options, error, t0, log, inputs, extra_files=None):
     """The result folder of a clip no frame of which calibrates: every file of the layout, with
     NaN angles and joints, null cameras, the lane status of every frame and the verdict
     ``"uncalibrated"`` (nothing is estimated without a camera)."""
@@ -235,8 +235,9 @@ def _write_uncalibrated(clip, reg, side, out_dir, options, message, t0, log, inp
     out_dir = Path(out_dir)
     F = clip.n_frames
     counts = reg.status_counts()
+    message = str(error)
     reasons = [f"calibrated_frames 0/{F}", f"frames_with_angles 0/{F}"] + (
-        [f"no plausible camera ({message})"] if ("do not overlap" in message or "finite posterior" in message)
+        [f"no plausible camera ({message})"] if error.reason in ("no_plausible_height", "no_finite_posterior")
         else []) + [
         f"lanes {k} {v}/{F}" for k, v in sorted(counts.items(), key=lambda kv: -kv[1])]
     status = [fl.status for fl in reg.frame_lanes]
@@ -294,7 +295,7 @@ def _forked_evidence(clip, reg, options, given, branch):
             return "ok", laplace_log_evidence(_branch_candidate(clip, reg, options, given, branch)[3],
                                               seed=options.sampler.seed)[0]
         except NoCalibrationError as exc:
-            return "error", str(exc)
+            return "error", (str(exc), exc.reason)
 
     return fork_call(work)
 
@@ -314,21 +315,22 @@ def _branch_models(clip, reg, options, given, log):
         # the narrow branch (the usual broadcast camera) is built here, the wide one's evidence
         # comes from a forked process meanwhile; the wide model is built here only if it wins
         wide = _forked_evidence(clip, copy.deepcopy(reg), options, given, "wide")
-        logz, errors, cand = {}, {}, None
+        logz, errors, reasons, cand = {}, {}, {}, None
         try:
             cand = _branch_candidate(clip, copy.deepcopy(reg), options, given, "narrow")
             logz["narrow"] = laplace_log_evidence(cand[3], seed=options.sampler.seed)[0]
         except NoCalibrationError as exc:
-            errors["narrow"] = str(exc)
+            errors["narrow"], reasons["narrow"] = str(exc), exc.reason
         status, value = wide()
         if status == "ok":
             logz["wide"] = float(value)
         else:
-            errors["wide"] = str(value)
+            errors["wide"], reasons["wide"] = value
         if not logz:
             reg.orient(options.priors.camera_height.centre(), clip.keypoints_px, "narrow", fps=clip.fps,
                        given=given)  # the side the uncalibrated result reports
-            raise NoCalibrationError(errors.get("narrow") or errors.get("wide"))
+            b = "narrow" if "narrow" in errors else "wide"
+            raise NoCalibrationError(errors[b], reasons[b])
         chosen = max(logz, key=logz.get)
         choice = BranchChoice(chosen, "evidence" if len(logz) > 1 else "only",
                               {b: logz.get(b) for b in BRANCHES}, errors)
@@ -392,7 +394,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     try:
         reg, side, lens, model, branch = _branch_models(clip, reg, options, given, log)
     except NoCalibrationError as exc:
-        return _write_uncalibrated(clip, reg, reg.camera_side, out_dir, options, str(exc), t0, log, inputs,
+        return _write_uncalibrated(clip, reg, reg.camera_side, out_dir, options, exc, t0, log, inputs,
                                    extra_files)
     smp = options.sampler
     copies = None

@@ -77,9 +77,13 @@ __all__ = ["ClipModel", "SamplerSettings", "PARAM_NAMES", "STILLNESS_SYS_SD", "N
 
 
 class NoCalibrationError(ValueError):
-    """No frame of the clip has a usable calibration family (no lanes of the straight found, or
-    lanes that allow no camera height the prior admits): the clip cannot be calibrated
-    (:func:`probreg.pipeline.run_clip` writes an ``"uncalibrated"`` result)."""
+    """The clip cannot be calibrated (``reason``: ``"no_family"``, no lanes of the straight;
+    ``"no_plausible_height"`` or ``"no_finite_posterior"``, lanes that allow no camera the
+    priors admit); :func:`probreg.pipeline.run_clip` writes an ``"uncalibrated"`` result."""
+
+    def __init__(self, message, reason="no_family"):
+        super().__init__(message)
+        self.reason = reason
 
 
 #: Systematic sd of the planted-foot slide (fraction of the running speed) at the true
@@ -111,12 +115,11 @@ class ClipModel(DrawPropagation, EmceeSampling):
     athlete_lane : int or None
     priors : ModelPriors
     dist : array_like (5,), optional
-        Known lens distortion.
+        Known lens distortion (the pipeline gives a known ``k1`` alone as a sharp ``lens`` prior).
     lens : LensModel, optional
-        The lens inferred from the lanes (:class:`probreg.calibration.lens.LensModel`): the
-        registration's lines are already undistorted with its ``kappa_star``, and ``k1``
-        becomes the last parameter of the posterior (prior: ``lens.prior``; likelihood: the
-        plumb-line evidence at ``k1 (r_ref / f_ref(h))**2``).
+        The lens from the lanes (:class:`probreg.calibration.lens.LensModel`): the lines are
+        already undistorted with its ``kappa_star``; ``k1`` is the last parameter (prior
+        ``lens.prior``, likelihood the plumb-line evidence at ``k1 (r_ref / f_ref(h))**2``).
     n_grid : int
         Heights (geometric) of the precomputed height-dependent statistics.
     track_weight : float
@@ -171,7 +174,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
         if not g_hi > g_lo:
             # lanes that allow no plausible camera (e.g. spurious lines of a grazing view) calibrate nothing
             raise NoCalibrationError(f"the prior's camera heights ({plo:.1f}-{phi:.1f} m) do not overlap the "
-                                     f"heights the lanes allow ({lo:.1f}-{hi:.1f} m)")
+                                     f"heights the lanes allow ({lo:.1f}-{hi:.1f} m)", "no_plausible_height")
         self.h_ref = float(np.clip(priors.camera_height.centre(), g_lo, g_hi))
         self._fix_offsets()
         # refined below the frames' branch tops (probreg.inference.heights)
@@ -191,7 +194,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
         if not np.isfinite(self._grid_log_prob()[1]).any():
             # e.g. a grazing view whose few calibrated frames give no limb lengths at any height
             raise NoCalibrationError("no camera height the lanes allow gives a finite posterior (no limb "
-                                     "lengths or no consistent camera at any height)")
+                                     "lengths or no consistent camera at any height)", "no_finite_posterior")
         self.timings = {"precompute_s": time.perf_counter() - t0}
 
     @property
@@ -633,9 +636,9 @@ class ClipModel(DrawPropagation, EmceeSampling):
         step = np.log(self.grid[1] / self.grid[0]) if len(self.grid) > 1 else 0.05
         scale = np.r_[step, 0.02, np.full(len(SEGMENTS), 0.02)]
         if self.lens is not None:  # a sharp prior (a given lens): start at its mean
-            sharp = self.lens.prior.sd < 0.002 + 0.01 * abs(base[-1])
-            base[-1] = self.lens.prior.mean if sharp else base[-1]
-            scale = np.r_[scale, self.lens.prior.sd if sharp else 0.002 + 0.01 * abs(base[-1])]
+            k_sd = min(self.lens.prior.sd, 0.002 + 0.01 * abs(base[-1]))
+            base[-1] = self.lens.prior.mean if k_sd == self.lens.prior.sd else base[-1]
+            scale = np.r_[scale, k_sd]
         p0 = base + rng.normal(0, 1, (n, len(base))) * scale
         # every walker must start where the posterior is positive
         for _ in range(50):

@@ -428,8 +428,9 @@ def test_a_clip_without_a_finite_posterior_at_any_height_is_uncalibrated(small_c
         self.ll_static[:] = -np.inf  # no height gives one camera for the clip
 
     monkeypatch.setattr(ClipModel, "_precompute", no_term_anywhere)
-    with pytest.raises(NoCalibrationError, match="finite posterior"):
+    with pytest.raises(NoCalibrationError, match="finite posterior") as info:
         ClipModel(register_clip(clip), clip.keypoints_px, clip.fps, clip.athlete_lane)
+    assert info.value.reason == "no_finite_posterior"  # the verdict reads the reason, not the message
     res = run_clip(small_clip, tmp_path / "out", RunOptions(sampler=FAST, report=False))
     run = json.loads((tmp_path / "out" / "run.json").read_text())
     assert run["verdict"] == "uncalibrated" and res is not None
