@@ -172,6 +172,18 @@ def test_a_given_k1_is_a_sharp_prior_on_the_inferred_lens_path(wide_lens_clip, t
     h_true = float(gt.cameras[0].C[2])
     lo, hi = np.percentile(h, [5, 95])
     assert lo <= h_true <= hi and abs(np.median(h) / h_true - 1) < 0.03
+    # a lens with more than k1 keeps the per-member undistortion (no sharp-prior path)
+    from probreg.calibration import register_clip
+    from probreg.io import load_clip
+    from probreg.pipeline import _branch_candidate
+
+    clip = load_clip(wide_lens_clip, min_score=0.3)
+    full = RunOptions(sampler=fast, report=False, dist=(k_true, 0.01, 0.0, 0.0, 0.0))
+    _, _, lens, model = _branch_candidate(clip, register_clip(clip), full, "auto", "narrow")
+    assert lens is None and model.lens is None and model.dist[1] == 0.01
+    _, _, lens, model = _branch_candidate(clip, register_clip(clip), RunOptions(dist=(k_true, 0, 0, 0, 0)), "auto",
+                                          "narrow")
+    assert lens.given_k1 == pytest.approx(k_true) and model.dist is None and lens.prior.mean == pytest.approx(k_true)
 
 
 def test_lens_none_is_recorded_and_the_keypoint_share_follows_the_detector_noise(
