@@ -402,7 +402,9 @@ class LensModel:
         return {"kappa_star": self.kappa_star, "corner_shift_px": self.kappa_star * self.evidence.r_ref,
                 "given_k1": self.given_k1,
                 "prior_sd": self.prior.sd, "prior_limit": self.prior.limit,
-                "informative": self.evidence.informative(self.prior, self.focal_ref_px),
+                # whether the lines tell plausible lenses apart (a given lens: those of the default prior)
+                "informative": self.evidence.informative(LensPrior() if self.given_k1 is not None else self.prior,
+                                                         self.focal_ref_px),
                 **self.evidence.to_dict()}
 
 

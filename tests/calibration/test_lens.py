@@ -165,7 +165,7 @@ def test_a_given_k1_is_a_sharp_prior_on_the_inferred_lens_path(wide_lens_clip, t
     assert cam["k1"] == {"median": k_true, "lo": k_true, "hi": k_true, "source": "given"}
     assert cam["frames"][0]["dist"][0] == pytest.approx(k_true)
     run = json.loads((tmp_path / "given" / "run.json").read_text())
-    assert run["lens"]["given_k1"] == pytest.approx(k_true)
+    assert run["lens"]["given_k1"] == pytest.approx(k_true) and run["lens"]["informative"]  # a 30 deg barrel lens
     k1_draws = np.asarray(res.posterior.posterior["k1"]).ravel()
     assert abs(np.median(k1_draws) - k_true) < 0.002 and np.std(k1_draws) < 0.004
     h = np.exp(np.asarray(res.posterior.posterior["log_height"]).ravel())
