@@ -357,7 +357,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
         C = np.column_stack([np.zeros(F), y, np.full(F, height_m)])
         C[~valid] = np.nan
         if self.lens is not None:
-            dist = np.array([self.lens.camera_k1(f if valid.any() else f * np.nan), 0.0, 0.0, 0.0, 0.0])
+            dist = np.array([self.lens.camera_k1(f), 0.0, 0.0, 0.0, 0.0])  # f: NaN without valid frames
         else:
             dist = np.zeros(5) if self.dist is None else self.dist
         return CameraArrays(valid=valid, C=C, R=R, focal_px=f, principal_px=self.pp, dist=dist)
