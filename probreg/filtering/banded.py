@@ -1,6 +1,7 @@
 """Banded building blocks of the cross-stride smoothers: the normal equations of one series
 assembled directly in LAPACK's lower band storage (no sparse matrices), their banded Cholesky
-factor, and the effective degrees of freedom of the fit from that factor.
+factor, and the effective degrees of freedom of the fit from that factor (by a selected
+inversion: only the band of the inverse that the trace needs).
 
 A series smoother's system ``(Qm + sn2 R' W R + P2) x = Qm y`` couples each frame to its
 neighbours (AR(1) noise, second differences) and to the frame one stride later (``R``), so it is
@@ -12,7 +13,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["SeriesSystem", "lower_band"]
+__all__ = ["SeriesSystem", "band_inverse_diagonals", "lower_band"]
 
 
 def _band_add(ab, cols, vals, w):
@@ -61,8 +62,8 @@ class SeriesSystem:
         self.tie_cols = np.column_stack([t[has], k, k + 1])
         self.tie_vals = np.column_stack([np.ones(len(k)), -(1 - a), -a])
         self.u = max(int(np.max(k + 1 - t[has])) if has.any() else 0, 2)
-        # AR(1) precision Q = B' B (B lower bidiagonal: the innovations); masked: Qm = G G'
-        # with G = M B' (M the observed frames)
+        # AR(1) precision Q = B' B (B lower bidiagonal: the innovations), masked to the observed
+        # frames: Qm, tridiagonal
         rho = float(np.clip(rho, 0.0, 0.9))
         s = np.sqrt(1 - rho**2)
         m = ok.astype(float)
@@ -70,10 +71,6 @@ class SeriesSystem:
         qd[[0, -1]] = 1.0 / s**2
         self.qd = m * qd
         self.qo = m[:-1] * m[1:] * (-rho / s**2)  # Qm[i, i + 1]
-        G = np.zeros((F, F))
-        G[t, t] = m * np.r_[1.0, np.full(F - 1, 1.0 / s)]
-        G[t[:-1], t[1:]] = m[:-1] * (-rho / s)
-        self.G = G
         base = np.zeros((self.u + 1, F))
         base[0] += self.qd
         base[1, :-1] += self.qo
@@ -99,17 +96,64 @@ class SeriesSystem:
         (``y0``: the data with missing frames at 0).  Raises ``numpy.linalg.LinAlgError`` when
         the system is not positive definite."""
         from scipy.linalg import cho_solve_banded, cholesky_banded
-        from scipy.linalg.lapack import dtbtrs
 
         ab = self.base.copy()
         _band_add(ab, self.tie_cols, self.tie_vals, sn2 / np.asarray(cvar, float))
         L = cholesky_banded(ab, lower=True, check_finite=False)
         x = cho_solve_banded((L, True), self.qm(y0), check_finite=False)
-        # tr(A^-1 G G') = ||L^-1 G||_F^2 with A = L L'
-        Z, info = dtbtrs(L, self.G, uplo="L")
+        # tr(A^-1 Qm) needs only the diagonal and first sub-diagonal of A^-1 (Qm is tridiagonal)
+        d, o = band_inverse_diagonals(L)
+        return x, float(self.qd @ d + 2.0 * (self.qo @ o))
+
+
+def band_inverse_diagonals(L, block=None):
+    """Diagonal and first sub-diagonal of ``A^-1`` from the banded Cholesky factor ``L`` of ``A``
+    (lower band storage ``L[i - j, j]``, as :func:`scipy.linalg.cholesky_banded` gives it).
+
+    Selected inversion by blocks (Takahashi's recursion): a factor of bandwidth ``u`` is block
+    lower bidiagonal in blocks of ``b >= u`` frames, and with ``X_i = L_{i+1,i} L_ii^-1`` the
+    blocks of ``S = A^-1`` follow from the last one up,
+    ``S_{i+1,i} = -S_{i+1,i+1} X_i``, ``S_ii = L_ii^-T L_ii^-1 + X_i' S_{i+1,i+1} X_i``,
+    at ``O(n b^2)`` instead of the ``O(n^2 u)`` of solving for all of ``L^-1``.
+
+    Returns ``(diag, sub)``: ``diag[i] = S[i, i]`` (n,), ``sub[i] = S[i + 1, i]`` (n - 1,).
+    Raises ``numpy.linalg.LinAlgError`` for a singular factor.
+
+    >>> from scipy.linalg import cholesky_banded
+    >>> rng = np.random.default_rng(0); n = 40
+    >>> B = np.triu(np.tril(rng.normal(size=(n, n)), 0), -5)   # bandwidth 5
+    >>> A = B @ B.T + n * np.eye(n)
+    >>> ab = np.array([np.r_[np.diagonal(A, -k), np.zeros(k)] for k in range(11)])
+    >>> d, s = band_inverse_diagonals(cholesky_banded(ab, lower=True), block=7)
+    >>> S = np.linalg.inv(A)
+    >>> bool(np.allclose(d, np.diagonal(S)) and np.allclose(s, np.diagonal(S, -1)))
+    True
+    """
+    from scipy.linalg.lapack import dtrtri
+
+    L = np.asarray(L, float)
+    u1, n = L.shape
+    b = max(u1 - 1, 16) if block is None else max(int(block), u1 - 1, 1)
+    k, j = np.nonzero(np.arange(u1)[:, None] + np.arange(n)[None, :] < n)
+    D = np.zeros((n, n))
+    D[j + k, j] = L[k, j]
+    diag, sub = np.empty(n), np.zeros(max(n - 1, 0))
+    S_next = None
+    for s in range(((n - 1) // b) * b, -1, -b):
+        e = min(s + b, n)
+        Linv, info = dtrtri(D[s:e, s:e], lower=1)
         if info != 0:
             raise np.linalg.LinAlgError("singular band factor")
-        return x, float(np.sum(Z * Z))
+        S = Linv.T @ Linv
+        if S_next is not None:
+            X = D[e:e + b, s:e] @ Linv
+            SX = S_next @ X
+            S += X.T @ SX
+            sub[e - 1] = -SX[0, -1]  # S[e, e - 1]
+        diag[s:e] = np.diagonal(S)
+        sub[s:e - 1] = np.diagonal(S, -1)
+        S_next = S
+    return diag, sub
 
 
 def lower_band(S, min_band=0):

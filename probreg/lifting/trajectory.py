@@ -408,9 +408,44 @@ def _track_from_contacts(ankles, contacts, fps, config):
                 kf.update(meas[i])
                 run_rejected = 0
         xs[i], Ps[i] = kf.x, kf.P
-    xs, Ps, _, _ = kf.rts_smoother(xs, Ps)
+    xs, Ps = rts_backward(xs, Ps, kf.F, kf.Q)
     return GroundTrack(position_m=xs[:, [0, 2]], velocity_mps=xs[:, [1, 3]], cov=Ps, contacts=contacts,
                        contact_points_m=cps, log_likelihood=loglik, status=status, half_step_m=half_step)
+
+
+def rts_backward(xs, Ps, F, Q):
+    """The Rauch-Tung-Striebel backward pass of a time-invariant model: smoothed states and
+    covariances from the filtered ones ``xs`` (n, d) and ``Ps`` (n, d, d).
+
+    The recursion of ``filterpy``'s ``KalmanFilter.rts_smoother`` (same formulas, same order),
+    with the predicted covariances and the smoother gains, which depend only on the filtered
+    covariances, computed for all steps at once; only the two short recursions remain a loop.
+
+    >>> from filterpy.kalman import KalmanFilter
+    >>> kf = KalmanFilter(dim_x=2, dim_z=1)
+    >>> kf.F = np.array([[1.0, 0.1], [0.0, 1.0]]); kf.H = np.array([[1.0, 0.0]])
+    >>> kf.Q = np.diag([1e-3, 1e-2]); kf.R = np.array([[0.5]]); kf.x = np.zeros(2)
+    >>> xs, Ps = np.zeros((30, 2)), np.zeros((30, 2, 2))
+    >>> for i in range(30):
+    ...     kf.predict(); kf.update(np.array([0.1 * i + np.sin(i)])); xs[i], Ps[i] = kf.x, kf.P
+    >>> x_ref, P_ref, _, _ = kf.rts_smoother(xs, Ps)
+    >>> x, P = rts_backward(xs, Ps, kf.F, kf.Q)
+    >>> bool(np.allclose(x, x_ref, rtol=1e-12, atol=1e-12) and np.allclose(P, P_ref, rtol=1e-12, atol=1e-12))
+    True
+    """
+    x, P = np.array(xs, float), np.array(Ps, float)
+    if len(x) < 2:
+        return x, P
+    Pf = P[:-1]
+    Pp = F @ Pf @ F.T + Q  # predicted covariance of step k + 1 from step k
+    K = Pf @ F.T @ np.linalg.inv(Pp)
+    a = x[:-1] - np.einsum("kij,kj->ki", K, x[:-1] @ F.T)  # x[k] + K (x_s[k + 1] - F x[k])
+    B = Pf - K @ Pp @ np.swapaxes(K, 1, 2)  # P[k] + K (P_s[k + 1] - Pp) K'
+    for k in range(len(x) - 2, -1, -1):
+        Kk = K[k]
+        x[k] = a[k] + Kk @ x[k + 1]
+        P[k] = B[k] + Kk @ P[k + 1] @ Kk.T
+    return x, P
 
 
 def _runs(flags):
