@@ -94,12 +94,16 @@ class DrawPropagation:
         parts = {k: {} for k in ("lens", "camera", "limbs", "keypoints")}
         with np.errstate(invalid="ignore"), warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # all-NaN frames of an angle
-            for g, cols in groups.items():
+            # every group's liftings in one call (one set of worker processes for all of them)
+            thetas = []
+            for cols in groups.values():
                 theta = np.tile(med, (n, 1))
                 theta[:, cols] = draws[:n, cols]
-                res = self._lift_draws(theta, rng, False, config, workers, None)["angles_point"]
+                thetas.append(theta)
+            res = self._lift_draws(np.concatenate(thetas), rng, False, config, workers, None)["angles_point"]
+            for i, g in enumerate(groups):
                 for a in ANGLE_NAMES:
-                    parts[g][a] = float(np.nanmean(np.nanvar(res[a], axis=0)))
+                    parts[g][a] = float(np.nanmean(np.nanvar(res[a][i * n:(i + 1) * n], axis=0)))
             for a in ANGLE_NAMES:
                 parts["keypoints"][a] = float(max(np.nanmean(np.nanvar(prop["angles"][a], axis=0)
                                                              - np.nanvar(prop["angles_point"][a], axis=0)), 0.0))
