@@ -444,15 +444,16 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     # the family's fold is not pinned by the value at its median
     sens = [model.member_sensitivity(height[k]) for k in ("lo", "median", "hi")]
     sensitivity = max((v for v in sens if not np.isnan(v)), default=float("nan"))
+    status = [_frame_status(reg.frame_lanes[i], c, bool(model.inconsistent[i]), model.gap_distance[i])
+              for i, c in enumerate(cam_list)]
+    agree = (sum(s == "ok" for s in status), sum(bool(fl.ok) for fl in reg.frame_lanes))
     verdict, reasons = clip_verdict(
         clip.n_frames, calibrated=sum(c is not None for c in cam_list), frames_with_angles=n_angle,
         rhat=diag["rhat_height"], ess=diag["ess_height"], log_height_draws=flat[:, 0],
         log_height_prior_sd=getattr(prior_h, "log_sd", None), side=side, bone_cv_pct=bone_length_cv(joints_med),
         speed_mps=gait_s.get("speed_mps", {}).get("median"),
         stature_draws=flat[:, 1], stature_prior=options.priors.stature, branch=branch,
-        member_sensitivity=sensitivity)
-    status = [_frame_status(reg.frame_lanes[i], c, bool(model.inconsistent[i]), model.gap_distance[i])
-              for i, c in enumerate(cam_list)]
+        member_sensitivity=sensitivity, lanes_agree=agree)
     result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
                        gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
                        verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,

@@ -138,3 +138,11 @@ def test_a_height_that_barely_fixes_the_camera_is_unreliable():
     assert clip_verdict(**GOOD, member_sensitivity=3.2) == ("ok", [])  # either side of 3.3
     assert clip_verdict(**GOOD, member_sensitivity=3.4)[0] == "unreliable"
     assert clip_verdict(**GOOD, member_sensitivity=float("nan")) == ("ok", [])
+
+
+def test_lanes_that_mostly_do_not_fit_the_camera_are_unreliable():
+    assert clip_verdict(**GOOD, lanes_agree=(64, 100)) == ("unreliable", ["lanes_agree_frames 64/100"])
+    # 80 % of the frames with lanes agree: ok; frames without lanes do not count against it
+    assert clip_verdict(**GOOD, lanes_agree=(80, 100)) == ("ok", [])
+    assert clip_verdict(**GOOD, lanes_agree=(60, 70)) == ("ok", [])
+    assert clip_verdict(**GOOD, lanes_agree=(0, 0)) == ("ok", [])
