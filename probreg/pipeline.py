@@ -446,7 +446,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     sensitivity = max((v for v in sens if not np.isnan(v)), default=float("nan"))
     status = [_frame_status(reg.frame_lanes[i], c, bool(model.inconsistent[i]), model.gap_distance[i])
               for i, c in enumerate(cam_list)]
-    agree = (sum(s == "ok" for s in status), sum(bool(fl.ok) for fl in reg.frame_lanes))
+    agree = (status.count("ok"), sum(status.count(k) for k in ("ok", "bridged_no_member", "bridged_inconsistent")))
     verdict, reasons = clip_verdict(
         clip.n_frames, calibrated=sum(c is not None for c in cam_list), frames_with_angles=n_angle,
         rhat=diag["rhat_height"], ess=diag["ess_height"], log_height_draws=flat[:, 0],

@@ -9,16 +9,18 @@ reason of its own, a short machine-readable string with the number that triggere
     fewer than :attr:`VerdictThresholds.min_calibrated` of the frames have a camera
     (lanes found and consistent, or bridged): the rest is guessed from too little.
 ``lanes_agree_frames n/m`` -> ``"unreliable"``
-    of the ``m`` frames whose lanes were found, only ``n`` (fewer than
-    :attr:`VerdictThresholds.min_lane_agreement`, 80 %) admit the clip's camera: their own
-    family has a member at the camera height found, on the clip's zoom path (``"ok"`` in
-    ``run.json``'s ``frame_status``; the rest are ``no_member``, ``inconsistent`` or bridged from
-    their neighbours).  The camera is static, so every frame's lanes should fit it; when many do
-    not, the lines were misread (lines a few pixels apart that merge at a low, grazing camera:
-    the fits jump between neighbours) and the camera rests on the frames that happen to agree.
-    A clip of the benchmark suite or of a stand or long-lens view agrees in all its frames;
-    four low grazing tuning clips (``probreg.sim.heldout`` seeds 8405, 8411, 8414, 8419, not of
-    the held-out set) agreed in 26-64 % of them, with knee errors of 19-46°.
+    of the ``m`` frames that have a camera and whose own lanes were found, only ``n`` (fewer
+    than :attr:`VerdictThresholds.min_lane_agreement`, 80 %) have lanes that admit that camera
+    (``"ok"`` in ``run.json``'s ``frame_status``); the others (``bridged_no_member``,
+    ``bridged_inconsistent``) took their camera from their neighbours against what their own
+    lanes say.  The camera is static, so every frame's lanes should fit it; when many do not,
+    the lines were misread (lines a few pixels apart that merge at a low, grazing camera: the
+    fits jump between neighbours) and the camera rests on the frames that happen to agree.
+    Frames left without a camera do not count here (they produce no angles;
+    ``calibrated_frames`` counts them).  A clip of the benchmark suite or of a stand or long-lens
+    view agrees in all its frames; four low grazing tuning clips (``probreg.sim.heldout`` seeds
+    8405, 8411, 8414, 8419, not of the held-out set) agreed in 31-66 % of them, with knee errors
+    of 19-46°.
 ``R-hat x`` / ``ESS n``
     the sampler did not mix (walkers as chains; R-hat above 1.1 or fewer than 100 effective
     draws of the camera height): the bands are not a posterior yet.
@@ -198,7 +200,8 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
         and the ends of its 90 % interval
         (:meth:`probreg.inference.ClipModel.member_sensitivity`).
     lanes_agree : (int, int), optional
-        Frames whose own lanes admit the clip's camera, and frames whose lanes were found.
+        Frames whose own lanes admit the clip's camera, and frames with a camera whose own lanes
+        were found.
 
     Returns
     -------
