@@ -5,7 +5,7 @@ import pytest
 from scipy import sparse
 
 from probreg.filtering import periodic_smooth_series
-from probreg.filtering.banded import SeriesSystem, lower_band
+from probreg.filtering.banded import SeriesSystem, band_inverse_diagonals, lower_band
 
 
 def _dense_reference(ok, lag, rho, p2_scale, y0, sn2, cvar):
@@ -78,3 +78,24 @@ def test_series_smoother_reduces_noise_with_gaps():
     assert np.sqrt(np.mean((x - truth) ** 2)) < 0.5 * 4
     assert info["noise_sd"] == pytest.approx(4, rel=0.25)
     assert np.all(np.isfinite(x[50:58]))  # the gap is filled from the neighbouring strides
+
+
+@pytest.mark.parametrize("n, u, block", [(1, 0, None), (1, 3, None), (2, 2, None), (5, 7, None), (17, 16, None),
+                                         (33, 16, None), (200, 40, None), (250, 35, 35), (250, 35, 90)])
+def test_band_inverse_diagonals_match_the_dense_inverse(n, u, block):
+    """The selected inversion's diagonal and first sub-diagonal equal those of the dense inverse,
+    for systems shorter than one block, of exactly a few blocks and of a ragged last block."""
+    from scipy.linalg import cholesky_banded
+
+    rng = np.random.default_rng(n + u)
+    w = min(u, n - 1)
+    B = np.triu(np.tril(rng.normal(size=(n, n)), 0), -w)
+    A = B @ B.T + n * np.eye(n)
+    ab = np.zeros((u + 1, n))
+    for k in range(w + 1):
+        ab[k, :n - k] = np.diagonal(A, -k)
+    d, s = band_inverse_diagonals(cholesky_banded(ab, lower=True), block=block)
+    S = np.linalg.inv(A)
+    assert d.shape == (n,) and s.shape == (max(n - 1, 0),)
+    np.testing.assert_allclose(d, np.diagonal(S), rtol=1e-10)
+    np.testing.assert_allclose(s, np.diagonal(S, -1), rtol=1e-9, atol=1e-14)

@@ -344,3 +344,35 @@ def test_ground_track_recovers_after_a_misplaced_first_footprint():
     assert abs(np.median(tr.velocity_mps[:, 0]) - v) < 0.1
     stuck = _track_from_contacts(ankles, contacts, fps, TrackConfig(max_rejected_run=10**6))
     assert np.median(stuck.velocity_mps[:, 0]) > 1.5 * v
+
+
+def test_rts_backward_equals_filterpys_smoother_on_the_ground_track_model():
+    """The ground track's backward pass (gains for all steps at once) against filterpy's own
+    ``rts_smoother`` on the track's model: 4 states, contacts on a third of the frames."""
+    from filterpy.common import Q_discrete_white_noise
+    from filterpy.kalman import KalmanFilter
+
+    from probreg.lifting.trajectory import rts_backward
+
+    rng = np.random.default_rng(4)
+    dt, F = 0.02, 250
+    kf = KalmanFilter(dim_x=4, dim_z=2)
+    kf.F = np.kron(np.eye(2), np.array([[1.0, dt], [0.0, 1.0]]))
+    kf.H = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
+    kf.Q = np.zeros((4, 4))
+    kf.Q[:2, :2] = Q_discrete_white_noise(2, dt=dt, var=4.0)
+    kf.Q[2:, 2:] = Q_discrete_white_noise(2, dt=dt, var=0.25)
+    kf.R = np.diag([0.05, 0.03]) ** 2
+    kf.x, kf.P = np.array([0.0, 8.0, -3.0, 0.0]), np.diag([4.0, 4.0, 0.5, 0.01])
+    xs, Ps = np.zeros((F, 4)), np.zeros((F, 4, 4))
+    for i in range(F):
+        if i:
+            kf.predict()
+        if rng.uniform() < 1 / 3:
+            kf.update(np.array([8.0 * i * dt, -3.0]) + rng.normal(0, [0.05, 0.03]))
+        xs[i], Ps[i] = kf.x, kf.P
+    x_ref, P_ref, _, _ = kf.rts_smoother(xs, Ps)
+    x, P = rts_backward(xs, Ps, kf.F, kf.Q)
+    np.testing.assert_allclose(x, x_ref, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(P, P_ref, rtol=1e-8, atol=1e-14)
+    assert rts_backward(xs[:1], Ps[:1], kf.F, kf.Q)[0].shape == (1, 4)  # one frame: nothing to smooth
