@@ -134,19 +134,28 @@ def band_inverse_diagonals(L, block=None):
     L = np.asarray(L, float)
     u1, n = L.shape
     b = max(u1 - 1, 16) if block is None else max(int(block), u1 - 1, 1)
-    k, j = np.nonzero(np.arange(u1)[:, None] + np.arange(n)[None, :] < n)
-    D = np.zeros((n, n))
-    D[j + k, j] = L[k, j]
+    # dense blocks straight from the band storage (memory n b, not n^2): entry (s + r, s + c) of
+    # the factor is L[r - c, s + c] (+ b rows for the block below the diagonal one)
+    off = np.arange(2 * b)[:, None] - np.arange(b)[None, :]
+    inside = (off >= 0) & (off < u1)
+    off = np.where(inside, off, 0)
+    col = np.broadcast_to(np.arange(b), off.shape)
+
+    def block_at(s, e):  # rows s .. min(s + 2b, n), columns s .. e of the factor
+        rows, w = min(2 * b, n - s), e - s
+        return L[off[:rows, :w], s + col[:rows, :w]] * inside[:rows, :w]
+
     diag, sub = np.empty(n), np.zeros(max(n - 1, 0))
     S_next = None
     for s in range(((n - 1) // b) * b, -1, -b):
         e = min(s + b, n)
-        Linv, info = dtrtri(D[s:e, s:e], lower=1)
+        D = block_at(s, e)
+        Linv, info = dtrtri(D[:e - s], lower=1)
         if info != 0:
             raise np.linalg.LinAlgError("singular band factor")
         S = Linv.T @ Linv
         if S_next is not None:
-            X = D[e:e + b, s:e] @ Linv
+            X = D[e - s:] @ Linv
             SX = S_next @ X
             S += X.T @ SX
             sub[e - 1] = -SX[0, -1]  # S[e, e - 1]
