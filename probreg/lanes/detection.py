@@ -199,7 +199,41 @@ def _dedupe(cands, cfg):
     return out
 
 
+def _drop_mixed(cands, frac, reach=20.0):
+    """The candidates without the lines that mix neighbours: a candidate whose support scatters
+    (RMS about a quadratic along it: a line bent by the lens is smooth) by more than ``frac`` of
+    the distance from its midpoint to the nearest other candidate line took its points from
+    several lines.  Where lines crowd
+    together (a low grazing camera's far lanes, 8-10 px apart) a rough line can cross them and
+    its profiles pick a different line in each stretch: the fit lies between them with a
+    scatter of a few px, which a clean line (~0.1-0.5 px) never has; its index and position
+    would corrupt the lane spacing that the calibration rests on.  Only lines closer than
+    ``reach`` px to another one are judged (those whose profiles can hold a neighbour).
+
+    >>> line = lambda y: np.array([0.0, 1.0, -y])
+    >>> xs = np.arange(0.0, 100.0, 5.0)
+    >>> clean = [(line(y), np.column_stack([xs, y + 0.1 * np.sin(xs)]), 100.0) for y in (10.0, 20.0, 30.0)]
+    >>> mixed = (line(25.0), np.column_stack([xs, np.where(xs < 50, 20.0, 30.0)]), 100.0)
+    >>> [float(c[0][2]) for c in _drop_mixed(clean + [mixed], 0.1)]
+    [-10.0, -20.0, -30.0]
+    """
+    if len(cands) < 2 or not frac:
+        return cands
+    lines = np.array([c[0] for c in cands])
+    keep = []
+    for k, (line, pts, _) in enumerate(cands):
+        rms = _sagitta(pts, line, with_residual=True)[1]
+        mid = pts.mean(0)
+        others = np.delete(lines, k, axis=0)
+        gap = float(np.min(np.abs(others[:, :2] @ mid + others[:, 2])))
+        keep.append(gap >= reach or rms <= frac * gap)
+    return [c for c, ok in zip(cands, keep) if ok]
+
+
 def _pencil_from_candidates(cands, fl, cfg):
+    cands = _drop_mixed(cands, cfg.max_rms_gap_frac, 2 * cfg.profile_half_px)
+    if len(cands) < 2:
+        return replace(fl, status="too_few_lines")
     size = fl.image_size
     mids = np.array([p.mean(0) for _, p, _ in cands])
     lines = np.array([c[0] for c in cands])
@@ -214,7 +248,7 @@ def _pencil_from_candidates(cands, fl, cfg):
     cosang = np.abs(np.sum(to_vp * dirs[None], -1)) / np.maximum(nrm, 1e-300)
     inlier = (cosang > np.cos(np.radians(cfg.vp_inlier_deg))) | (nrm < 1e-9)
     count = inlier.sum(1)
-    score = count * 1e9 + inlier @ lengths  # most lines first, then the longest support
+    score = inlier @ lengths + count  # the longest support (many short pieces of clutter or of a bend lose)
     if len(score) == 0:
         return replace(fl, status="too_few_lines")
     p = int(np.argmax(score))
@@ -253,12 +287,59 @@ def _pencil_from_candidates(cands, fl, cfg):
         # a degenerate pencil (lines merging into one, e.g. a grazing view): no lane geometry
         return replace(fl, status="too_few_lines", extra={**fl.extra, "degenerate_pencil": True})
     idx, spacing = assign_line_indices(coord[order], cfg.max_missing_lines)
+    while (drop := _off_comb(coord[order], idx, spacing, cfg.max_missing_lines)) is not None:
+        # a line off the lanes' equally spaced comb (the infield's edge, a far kerb) shifted
+        # every index; without it, the vanishing point and the lines again
+        keep = np.delete(order, drop)  # the other lines, in their order
+        sets = [sets[k] for k in np.sort(keep)]
+        v_unit, cov, sigma = _refine_vp(sets, v_unit, size)
+        lines_px, res = lines_through_point(sets, v_unit, size)
+        coord = _pencil_coordinate(lines_px, v_unit, size)
+        order = np.searchsorted(np.sort(keep), keep)  # the same order, in the new sets' numbering
+        idx, spacing = assign_line_indices(coord[order], cfg.max_missing_lines)
     lanes = tuple(LaneLine(line=lines_px[o], points_px=sets[o], rms_px=float(np.sqrt(np.mean(res[o] ** 2))),
                            index=int(k)) for o, k in zip(order, idx))
     spacing_px = (_spacing_residual_px(lanes, coord[order], idx, v_unit, size) if len(lanes) >= 4
                   else float("nan"))
     return replace(fl, status="ok", lines=lanes, vanishing_point=_from_unit(v_unit, size), vp_cov=cov,
                    spacing_residual_px=spacing_px, extra={"vp_unit": v_unit, "vp_sigma_px": sigma})
+
+
+def _off_comb(coord, idx, resid, max_missing, frac=0.1):
+    """Position (in ``coord``'s order) of a line to drop from a pencil whose lines an equally
+    spaced comb does not fit, or None.
+
+    Lane lines are equally spaced on the ground, so their pencil coordinates follow a 1-D
+    projective map of their indices (:func:`assign_line_indices`).  When the misfit ``resid``
+    exceeds ``frac`` of the mean step per index, every line is left out in turn; the one
+    whose absence brings the misfit below that bound, and to less than half, is dropped (five
+    lines at least: four still check the comb).  On a low grazing tuning clip a straight edge
+    300 px above the lanes (the infield's far edge) joined the pencil as line 0 and put every
+    lane one index off.
+
+    >>> t = 100.0 / (1 + 0.05 * np.arange(8.0))      # eight equally spaced lines in perspective
+    >>> idx, r = assign_line_indices(t)
+    >>> _off_comb(t, idx, r, 2) is None
+    True
+    >>> t2 = np.r_[160.0, t]                         # and an edge above them
+    >>> idx2, r2 = assign_line_indices(t2)
+    >>> int(_off_comb(t2, idx2, r2, 2))
+    0
+    """
+    n = len(coord)
+    if n < 5 or not np.isfinite(resid):
+        return None
+    step = abs(coord[-1] - coord[0]) / max(idx[-1] - idx[0], 1)
+    if not resid > frac * step:
+        return None
+    best, best_r = None, resid
+    for j in range(n):
+        c = np.delete(coord, j)
+        i2, r2 = assign_line_indices(c, max_missing)
+        step2 = abs(c[-1] - c[0]) / max(i2[-1] - i2[0], 1)
+        if r2 < best_r and r2 <= frac * step2 and r2 < 0.5 * resid:
+            best, best_r = j, r2
+    return best
 
 
 def _join_pieces(sets, lines_px, coord, max_frac=0.2, max_overlap=0.5):

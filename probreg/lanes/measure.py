@@ -122,6 +122,7 @@ def _measure_lines(image_bgr, endpoint_sets, cfg, exclude=None):
     # lines alike in both are measured in one batch (one gather, one centroid pass)
     pixels = image_bgr.reshape(-1, 3)  # flat indexing: a 1-D gather is faster than a 2-D one
     plans, groups = [], {}
+    crowded = _crowded(endpoint_sets, 2 * cfg.profile_half_px)
     for k, endpoints in enumerate(endpoint_sets):
         endpoints = np.asarray(endpoints, float)
         a, b, c = _fit_line(endpoints)
@@ -148,7 +149,10 @@ def _measure_lines(image_bgr, endpoint_sets, cfg, exclude=None):
         inside = (X.min(1) >= 0) & (Y.min(1) >= 0) & (X.max(1) <= w - 1) & (Y.max(1) <= h - 1)
         flat_idx = (np.clip(Y, 0, h - 1) * w + np.clip(X, 0, w - 1)).ravel()
         prof = np.take(pixels, flat_idx, axis=0).reshape(minor.shape + (3,)) @ _LUMA_BGR
-        off, ok = _profile_centroids(prof, offs.astype(float), cfg.threshold * 0.6)
+        counts = [len(plans[k][0]) for k in members]
+        line_id = np.repeat(np.arange(len(members)), counts)
+        off, ok = _profile_centroids(prof, offs.astype(float), cfg.threshold * 0.6, line_id, major,
+                                     crowded=np.repeat(crowded[members], counts))
         ok &= inside
         ax = 0 if horizontal else 1
         pts = np.empty((len(major), 2))
@@ -163,7 +167,28 @@ def _measure_lines(image_bgr, endpoint_sets, cfg, exclude=None):
             for k, plan in enumerate(plans)]
 
 
-def _profile_centroids(prof, offs, min_contrast):
+def _crowded(endpoint_sets, reach_px, min_px=3.0, max_angle_deg=5.0):
+    """Whether each rough line has a near-parallel neighbour closer than ``reach_px`` at its
+    midpoint (one within ``min_px`` is a duplicate of it, not a neighbour): its profiles may
+    hold another line.
+
+    >>> seg = lambda y: np.array([[0.0, y], [500.0, y + 5.0]])
+    >>> _crowded([seg(0), seg(9), seg(60), seg(61)], 20).tolist()
+    [True, True, False, False]
+    """
+    n = len(endpoint_sets)
+    if n < 2:
+        return np.zeros(n, bool)
+    lines = np.array([_fit_line(np.asarray(e, float)) for e in endpoint_sets])
+    mids = np.array([np.asarray(e, float).mean(0) for e in endpoint_sets])
+    dist = np.abs(mids @ lines[:, :2].T + lines[:, 2][None, :])  # (k, j): midpoint k to line j
+    parallel = np.abs(lines[:, :2] @ lines[:, :2].T) > np.cos(np.radians(max_angle_deg))
+    near = parallel & (dist > min_px) & (dist < reach_px)
+    np.fill_diagonal(near, False)
+    return near.any(1)
+
+
+def _profile_centroids(prof, offs, min_contrast, line_id=None, along=None, crowded=None):
     """Background-subtracted centroids of bright lines in profiles (N, M) sampled at ``offs``.
 
     The background is taken per side of the peak (the two sides may differ: infield and
@@ -172,6 +197,24 @@ def _profile_centroids(prof, offs, min_contrast):
     widened by one sample on each side and kept unclipped there, so that cutting the
     blurred flanks at a threshold does not lock the centre to the pixel grid.
 
+    Lines closer together than the profile is long (the far lanes of a low, grazing camera:
+    8-10 px apart in a 21 px profile) put several peaks in one profile.  Peaks are the local
+    maxima with a prominence (height above the higher of the lowest points between them and
+    the neighbouring maxima) of at least a quarter of the profile's largest; the line
+    measured is the peak nearest the rough line, not the brightest one (taking the brightest,
+    neighbouring columns jumped between two lines and the fitted line came out between them).
+    A rough line halfway between two lines still meets both: with ``line_id`` (N,) (which
+    line each profile belongs to) the peaks are chosen again, nearest the median offset of
+    that line's first choices, so that all its profiles take the same line; with ``along``
+    (N,) (each profile's position along its line) twice more, nearest a straight line fitted
+    to the choices (a rough line slightly tilted against the lines it crosses).
+    Towards a neighbouring peak the stretch stops at the valley between them, and that side's
+    background is the valley's level (the outer samples lie on the neighbour, or beyond it on
+    another surface: the infield next to the innermost line).  A profile with one peak is
+    measured as before, and so is every profile not marked ``crowded`` (N,) (a rough line
+    without a near-parallel neighbour within two profile half-widths, :func:`_crowded`; all
+    are when it is not given).
+
     Returns the offsets (N,) and whether each profile saw a line (contrast above
     ``min_contrast``, widened stretch inside the profile).
 
@@ -179,24 +222,87 @@ def _profile_centroids(prof, offs, min_contrast):
     >>> off, ok = _profile_centroids(prof, np.arange(8.0) - 4, 20)
     >>> float(off[0]), bool(ok[0])
     (0.0, True)
+    >>> # two lines 4 samples apart, the brighter one farther from the rough line (offset 0)
+    >>> prof = np.array([[10, 10, 40, 90, 40, 10, 60, 140, 60, 10, 10.0]])
+    >>> off, ok = _profile_centroids(prof, np.arange(11.0) - 4, 20)
+    >>> float(off[0]), bool(ok[0])
+    (-1.0, True)
     """
     n_side = 2
-    cols = np.arange(prof.shape[1])[None, :]
-    am = np.argmax(prof, axis=1)[:, None]
-    left_bg = prof[:, :n_side].mean(1)[:, None]
-    right_bg = prof[:, -n_side:].mean(1)[:, None]
+    N, M = prof.shape
+    cols = np.arange(M)[None, :]
+    # local maxima (the first sample of a flat top, as argmax takes it) and their prominence
+    is_max = np.zeros(prof.shape, bool)
+    is_max[:, 1:-1] = (prof[:, 1:-1] > prof[:, :-2]) & (prof[:, 1:-1] >= prof[:, 2:])
+    # the brightest sample is the one peak unless another maximum reaches a quarter of its height
+    # above the lower outer level, or it lies at the profile's end (most profiles have neither):
+    # only the others need the prominences
+    floor = np.minimum(prof[:, :n_side].mean(1), prof[:, -n_side:].mean(1))[:, None]
+    bright = np.argmax(prof, axis=1)
+    cand = cols == bright[:, None]
+    n_strong = np.sum(is_max & (prof - floor >= 0.25 * (prof.max(1, keepdims=True) - floor)), 1)
+    crowded = np.ones(N, bool) if crowded is None else np.asarray(crowded, bool)
+    multi = np.flatnonzero(crowded & ((n_strong >= 2) | ((n_strong >= 1) & ~is_max[np.arange(N), bright])))
+    if len(multi):
+        pm, mm = prof[multi], is_max[multi]
+        low_l, low_r = np.empty_like(pm), np.empty_like(pm)
+        run_l, run_r = pm[:, 0].copy(), pm[:, -1].copy()
+        for c in range(M):  # lowest point since the previous maximum, from either side
+            low_l[:, c] = run_l
+            run_l = np.where(mm[:, c], pm[:, c], np.minimum(run_l, pm[:, c]))
+            low_r[:, M - 1 - c] = run_r
+            run_r = np.where(mm[:, M - 1 - c], pm[:, M - 1 - c], np.minimum(run_r, pm[:, M - 1 - c]))
+        prom = np.where(mm, pm - np.maximum(low_l, low_r), -np.inf)
+        cand[multi] = mm & (prom >= 0.25 * prom.max(1, keepdims=True))
+    am = np.where(cand, np.abs(offs)[None, :], np.inf).argmin(1)
+    if line_id is not None and len(multi):
+        # each line's majority: the median offset of its first choices, then the nearest peak to it
+        line_id = np.asarray(line_id)
+        target = np.zeros(N)
+        lines = np.unique(line_id[multi])  # lines with a profile that has a choice
+        for it in range(1 if along is None else 3):
+            for k in lines:
+                seen = (line_id == k) & cand.any(1)
+                if not seen.any():
+                    continue
+                if it == 0 or seen.sum() < 3:
+                    target[line_id == k] = np.median(offs[am[seen]])
+                else:
+                    coef = np.polyfit(along[seen], offs[am[seen]], 1)
+                    target[line_id == k] = np.polyval(coef, along[line_id == k])
+            am = np.where(cand, np.abs(offs[None, :] - target[:, None]), np.inf).argmin(1)
+    am = np.where(cand.any(1), am, np.argmax(prof, axis=1))[:, None]
+    # the nearest other peak on each side, and the valley between it and the chosen one
+    nb_l = np.where(cand & (cols < am), cols, -1).max(1)[:, None]
+    nb_r = np.where(cand & (cols > am), cols, M).min(1)[:, None]
+    val_l = np.where((cols > nb_l) & (cols < am), prof, np.inf).argmin(1)[:, None]
+    val_r = np.where((cols > am) & (cols < nb_r), prof, np.inf).argmin(1)[:, None]
+    outer_l, outer_r = prof[:, :n_side].mean(1)[:, None], prof[:, -n_side:].mean(1)[:, None]
+    low_l, low_r = np.take_along_axis(prof, val_l, 1), np.take_along_axis(prof, val_r, 1)
+    top = np.take_along_axis(prof, am, 1)
+    # a neighbour also where the profile rises again towards its end (a line cut by the
+    # profile's end: its outer samples are no background), provided the valley before it is
+    # down at the other side's background level
+    cr = crowded[:, None]
+    has_l = (nb_l >= 0) | (cr & (outer_l - low_l >= 0.25 * (top - low_l))
+                           & (low_l - np.minimum(outer_r, low_r) <= 0.15 * (top - low_l)))
+    has_r = (nb_r < M) | (cr & (outer_r - low_r >= 0.25 * (top - low_r))
+                          & (low_r - np.minimum(outer_l, low_l) <= 0.15 * (top - low_r)))
+    left_bg = np.where(has_l, low_l, outer_l)
+    right_bg = np.where(has_r, low_r, outer_r)
     base = np.where(cols < am, left_bg, right_bg)
-    top = prof.max(axis=1)[:, None]
     peak = (top - np.minimum(left_bg, right_bg))[:, 0]
     # weights ~ line coverage on both sides: normalise by the contrast on each side
     wts = (prof - base) / np.maximum(top - base, 1e-6) * peak[:, None]
     low = wts <= 0.15 * peak[:, None]
     left = np.where(low & (cols < am), cols, -1).max(1) - 1
-    right = np.where(low & (cols > am), cols, prof.shape[1]).min(1) + 1
+    right = np.where(low & (cols > am), cols, M).min(1) + 1
+    left = np.where(has_l[:, 0], np.maximum(left, val_l[:, 0] - 1), left)
+    right = np.where(has_r[:, 0], np.minimum(right, val_r[:, 0] + 1), right)
     wts = np.where((cols > left[:, None]) & (cols < right[:, None]), wts, 0.0)
     with np.errstate(invalid="ignore", divide="ignore"):
         off = (wts * offs).sum(1) / wts.sum(1)
-    ok = (peak > min_contrast) & (left >= 0) & (right <= prof.shape[1] - 1) & np.isfinite(off)
+    ok = (peak > min_contrast) & (left >= 0) & (right <= M - 1) & np.isfinite(off)
     return off, ok
 
 

@@ -64,6 +64,9 @@ class LaneDetectorConfig:
     #: 15-25 grey levels above the track; worn paint, haze, a long lens); 0 turns it off
     low_contrast_threshold: int = 12
     low_contrast_snr: float = 6.0
+    #: a line whose support scatters by more than this share of the distance to the nearest
+    #: other line mixes neighbouring lines and is dropped (:func:`probreg.lanes.detection._drop_mixed`)
+    max_rms_gap_frac: float = 0.1
 
 
 @dataclass(frozen=True)

@@ -210,9 +210,11 @@ def test_following_recovers_from_a_wrong_motion_estimate(monkeypatch):
             assert min(np.max(np.abs(ln.endpoints_px @ t[:2] + t[2])) for t in true) < 0.1
             assert ln.rms_px < 0.3
     assert [ln.track_id for ln in fls[1].lines] == [ln.track_id for ln in fls[0].lines]
-    # without the scatter check the followed lines are several pixels off
+    # without the scatter check the followed lines used to be several pixels off (profiles took
+    # the brightest line in reach); each profile now takes the peak nearest its line's majority,
+    # so they stay on their own lines even then
     loose = track_lanes(frames, LaneDetectorConfig(track_rms_px=1e9))
-    assert max(ln.rms_px for ln in loose[1].lines) > 1.0
+    assert max(ln.rms_px for ln in loose[1].lines) < 0.3
 
 
 def test_square_on_narrow_view_direction_is_unbiased():
@@ -424,3 +426,94 @@ def test_points_near_capsules_agree_with_the_distance_to_every_segment():
     assert 50 < want.sum() < 3900  # points on both sides of the question
     assert np.array_equal(got, want)
     assert not got[-1]
+
+
+def _grazing_image(rng, W=1280, H=720, n=9, contrast=36.0, noise=1.5):
+    """A low camera far from the straight: nine nearly horizontal lines 9-11 px apart (1.6-1.9 px
+    wide, anti-aliased), the innermost on the edge of a darker infield, the lines' spacing
+    growing towards the camera; JPEG-compressed.  Returns the image and the true lines as
+    ``(y at x = 0, y at the vanishing point's x, that x)``."""
+    img = np.zeros((H, W, 3), np.float32)
+    img[:] = (60, 95, 150)  # track
+    vp = np.array([-40000.0, 300.0])  # far to the left, slightly above
+    xx, yy = np.arange(W), np.arange(H)[:, None]
+    y0 = 430.0 + np.cumsum(np.r_[0.0, 9.0 + 0.25 * np.arange(n - 1)])  # 9 ... 11 px apart
+    infield = y0[0] + (vp[1] - y0[0]) / vp[0] * xx
+    dark = yy < infield[None, :] - 1.5
+    img[dark] = (40, 90, 40)
+    for k, y in enumerate(y0):
+        yc = y + (vp[1] - y) / vp[0] * xx
+        width = 1.6 + 0.03 * k
+        img += contrast * np.clip(width / 2 + 0.5 - np.abs(yy - yc[None, :]), 0, 1)[..., None]
+    img += rng.normal(0, noise, img.shape)
+    ok, buf = cv2.imencode(".jpg", np.clip(img, 0, 255).astype(np.uint8), [cv2.IMWRITE_JPEG_QUALITY, 92])
+    return cv2.imdecode(buf, cv2.IMREAD_COLOR), [(y, vp[1], vp[0]) for y in y0]
+
+
+def test_crowded_lines_of_a_grazing_view_are_each_measured_on_one_line():
+    """Lines 9-11 px apart in a 21 px profile (issue 25): each profile measures the peak nearest
+    its rough line, not the brightest one, and stops at the valley towards a neighbour; a line
+    whose support still mixes two neighbours is dropped.  Before, fitted lines fell between
+    true ones (by 2-5 px on a grazing tuning clip) and the family placed the camera at a quarter
+    of its distance.  Every line found lies on a true one and the indices follow the truth."""
+    rng = np.random.default_rng(7)
+    img, truth = _grazing_image(rng)
+    xs = np.linspace(20, 1260, 12)
+    frames = [(i, np.roll(img, i // 4, axis=0)) for i in range(12)]  # followed from frame to frame
+    for fl in [detect_lanes(img)] + track_lanes(frames):
+        d = (fl.frame or 0) // 4  # rows the frame was moved down by
+        assert fl.status == "ok" and len(fl.lines) >= 6
+        found = []
+        for ln in fl.lines:
+            a, b, c = ln.line
+            y_est = -(a * xs + c) / b
+            errs = [np.abs(y_est - (y + d + (yv - y) * xs / xv)).max() for y, yv, xv in truth]
+            assert min(errs) < 0.5, (fl.frame, errs)
+            found.append((int(np.argmin(errs)), ln.index))
+        ks, idx = np.array(found).T
+        assert np.array_equal(ks - ks[0], idx - idx[0])
+
+
+def test_a_line_next_to_a_darker_surface_is_centred_on_itself():
+    """The innermost line borders the darker infield; with its neighbour 9 px away the profile
+    around a rough line between them holds both, the infield edge and the track between."""
+    from probreg.lanes.measure import _profile_centroids
+
+    offs = np.arange(-10.0, 11.0)
+
+    def profile(x):
+        return (np.where(x < -5, 75.0, 104.0) + 36 * np.exp(-0.5 * ((x + 4.0) / 0.8) ** 2)
+                + 36 * np.exp(-0.5 * ((x - 5.0) / 0.8) ** 2))
+
+    off, ok = _profile_centroids(profile(offs)[None], offs, 10)
+    # the nearer line, not the step's side (the step beside it pulls it by 0.1 px)
+    assert ok[0] and off[0] == pytest.approx(-4.0, abs=0.15)
+    # one line's profiles take the same line, also where its rough line is nearer the other one
+    shifts = np.array([0.6, 0.8, 1.0, 0.3, -0.5])  # lines at -4 - s and 5 - s: three nearer the second
+    off, ok = _profile_centroids(np.stack([profile(offs + s) for s in shifts]), offs, 10, line_id=np.zeros(5, int))
+    assert ok.all() and np.allclose(off + shifts, 5.0, atol=0.1)
+
+
+def test_a_straight_edge_off_the_lanes_comb_is_left_out():
+    """A bright straight edge 250 px above the lanes, through their vanishing point (the
+    infield's far edge of a grazing view), joins the pencil; the equally spaced comb does not
+    fit it, so it is dropped instead of shifting every lane's index by one."""
+    rng = np.random.default_rng(11)
+    img, truth = _grazing_image(rng)
+    W = img.shape[1]
+    xx, yy = np.arange(W), np.arange(img.shape[0])[:, None]
+    y, yv, xv = truth[0]
+    edge = (y - 250) + (yv - (y - 250)) * xx / xv
+    band = np.clip(1.5 - np.abs(yy - edge[None, :]), 0, 1)[..., None] * 60.0
+    img = np.clip(img.astype(np.float32) + band, 0, 255).astype(np.uint8)
+    fl = detect_lanes(img)
+    assert fl.status == "ok" and len(fl.lines) >= 6
+    xs = np.linspace(20, 1260, 12)
+    for ln in fl.lines:
+        a, b, c = ln.line
+        y_est = -(a * xs + c) / b
+        errs = [np.abs(y_est - (y0 + (yv0 - y0) * xs / xv0)).max() for y0, yv0, xv0 in truth]
+        k = int(np.argmin(errs))
+        assert errs[k] < 0.5 and ln.index - fl.lines[0].index == k - int(np.argmin(
+            [np.abs(-(fl.lines[0].line[0] * xs + fl.lines[0].line[2]) / fl.lines[0].line[1]
+                    - (y0 + (yv0 - y0) * xs / xv0)).max() for y0, yv0, xv0 in truth]))
