@@ -446,7 +446,7 @@ def _grazing_image(rng, W=1280, H=720, n=9, contrast=36.0, noise=1.5):
         width = 1.6 + 0.03 * k
         img += contrast * np.clip(width / 2 + 0.5 - np.abs(yy - yc[None, :]), 0, 1)[..., None]
     img += rng.normal(0, noise, img.shape)
-    ok, buf = cv2.imencode(".jpg", np.clip(img, 0, 255).astype(np.uint8), [cv2.IMWRITE_JPEG_QUALITY, 92])
+    _, buf = cv2.imencode(".jpg", np.clip(img, 0, 255).astype(np.uint8), [cv2.IMWRITE_JPEG_QUALITY, 92])
     return cv2.imdecode(buf, cv2.IMREAD_COLOR), [(y, vp[1], vp[0]) for y in y0]
 
 
