@@ -203,12 +203,12 @@ def _drop_mixed(cands, frac, reach=20.0):
     """The candidates without the lines that mix neighbours: a candidate whose support scatters
     (RMS about a quadratic along it: a line bent by the lens is smooth) by more than ``frac`` of
     the distance from its midpoint to the nearest other candidate line took its points from
-    several lines.  Where lines crowd
-    together (a low grazing camera's far lanes, 8-10 px apart) a rough line can cross them and
-    its profiles pick a different line in each stretch: the fit lies between them with a
-    scatter of a few px, which a clean line (~0.1-0.5 px) never has; its index and position
-    would corrupt the lane spacing that the calibration rests on.  Only lines closer than
-    ``reach`` px to another one are judged (those whose profiles can hold a neighbour).
+    several lines.  Where lines crowd together (a low grazing camera's far lanes, 8-10 px
+    apart) a rough line can cross them and its profiles pick a different line in each stretch:
+    the fit lies between them with a scatter of a few px, which a clean line (~0.1-0.5 px)
+    never has; its index and position would corrupt the lane spacing that the calibration
+    rests on.  Only lines closer than ``reach`` px to another one are judged (those whose
+    profiles can hold a neighbour).
 
     >>> line = lambda y: np.array([0.0, 1.0, -y])
     >>> xs = np.arange(0.0, 100.0, 5.0)

@@ -245,14 +245,14 @@ def _profile_centroids(prof, offs, min_contrast, line_id=None, along=None, crowd
     multi = np.flatnonzero(crowded & ((n_strong >= 2) | ((n_strong >= 1) & ~is_max[np.arange(N), bright])))
     if len(multi):
         pm, mm = prof[multi], is_max[multi]
-        low_l, low_r = np.empty_like(pm), np.empty_like(pm)
+        dip_l, dip_r = np.empty_like(pm), np.empty_like(pm)
         run_l, run_r = pm[:, 0].copy(), pm[:, -1].copy()
         for c in range(M):  # lowest point since the previous maximum, from either side
-            low_l[:, c] = run_l
+            dip_l[:, c] = run_l
             run_l = np.where(mm[:, c], pm[:, c], np.minimum(run_l, pm[:, c]))
-            low_r[:, M - 1 - c] = run_r
+            dip_r[:, M - 1 - c] = run_r
             run_r = np.where(mm[:, M - 1 - c], pm[:, M - 1 - c], np.minimum(run_r, pm[:, M - 1 - c]))
-        prom = np.where(mm, pm - np.maximum(low_l, low_r), -np.inf)
+        prom = np.where(mm, pm - np.maximum(dip_l, dip_r), -np.inf)
         cand[multi] = mm & (prom >= 0.25 * prom.max(1, keepdims=True))
     am = np.where(cand, np.abs(offs)[None, :], np.inf).argmin(1)
     if line_id is not None and len(multi):
