@@ -17,8 +17,9 @@ otherwise the lane status of the frame, e.g. ``too_few_lines``, ``no_straight``)
 ``run.json`` also holds the clip ``verdict`` (``"ok"``, ``"unreliable"`` or ``"uncalibrated"``,
 :func:`probreg.inference.verdict.clip_verdict`) with ``verdict_reasons``, the camera side and
 the evidence for both sides (``camera_side``), the notes about the input (``input_notes``:
-ignored files, missing images, absurd keypoints) and, when keypoints lay far outside the
-image, their count per frame (``keypoints_outside_image``).
+ignored files, missing images, absurd keypoints, frames without a detection), the 2D keypoints'
+per-frame ``keypoint_status`` (:func:`probreg.filtering.detection_status`) and, when keypoints
+lay far outside the image, their count per frame (``keypoints_outside_image``).
 """
 
 from __future__ import annotations
@@ -33,6 +34,7 @@ from .analysis import GAIT_FIELDS
 from .calibration.lens import LensPrior, lens_registration
 from .calibration.registration import camera_json, register_clip
 from .calibration.side import requested_side
+from .filtering import detection_status
 from .geometry import JOINT_NAMES
 from .inference import ModelPriors, angle_bands, gait_cycle_bands, gait_intervals
 from .inference.heights import HEIGHT_SYSTEMATIC_SD
@@ -41,7 +43,7 @@ from .inference.sampling import SamplerSettings
 from .inference.evidence import BRANCHES, BranchChoice, laplace_log_evidence
 from .inference.verdict import bone_length_cv, clip_verdict
 from .inference.parallel import default_workers, fork_call
-from .io.clip import ClipFormatError, load_clip, write_json
+from .io.clip import FPS_RANGE, ClipFormatError, load_clip, write_json
 from .io.frames import has_frames
 from .io.output import atomic_output_dir, prepare_output
 from .io.opensim import write_mot, write_trc
@@ -255,6 +257,7 @@ def _write_uncalibrated(clip, reg, side, out_dir, options, error, t0, log, input
         write_json(tmp / "run.json", {"verdict": "uncalibrated", "verdict_reasons": reasons, "error": message,
                                      "camera_side": side.to_dict(), "input_notes": list(clip.notes),
                                      "timings_s": timings, "frame_status": status,
+                                     "keypoint_status": detection_status(clip.keypoints_px),
                                      "lane_status_counts": counts})
         result = RunResult(out_dir=out_dir, model=None, posterior=None, angle_summary=summ, height={},
                            gait={}, diagnostics={}, timings=timings, verdict="uncalibrated",
@@ -489,7 +492,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                                      "height_allowance": options.height_allowance,
                                      "lens": lens_doc, "band_decomposition": decomposition,
                                      "band_decomposition_method": DECOMPOSITION_METHOD,
-                                     "frame_status": status, "noise_px": model.noise_sd,
+                                     "frame_status": status, "keypoint_status": detection_status(model.raw, model.kp),
+                                     "noise_px": model.noise_sd,
                                      "noise_rho": model.noise_rho, "n_draws": len(draws),
                                      "priors": {"camera_height": repr(options.priors.camera_height),
                                                 "stature": repr(options.priors.stature)}})
@@ -608,6 +612,8 @@ def run_source(source, out_dir, options: RunOptions = RunOptions(), model=None, 
 
     from .io.clip import write_keypoints_json
 
+    if fps is not None and not FPS_RANGE[0] <= float(fps) <= FPS_RANGE[1]:  # NaN fails too
+        raise ValueError(f"--fps must be a frame rate between {FPS_RANGE[0]:g} and {FPS_RANGE[1]:g}, got {fps}")
     source = Path(source)
     video = is_video(source)
     if not video and model is None:

@@ -13,7 +13,7 @@ from .basic import (
 )
 from .periodic import periodic_smooth
 
-__all__ = ["clean_keypoints"]
+__all__ = ["clean_keypoints", "detection_status"]
 
 
 def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=3.0, max_gap=10,
@@ -71,3 +71,27 @@ def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=
         out[use & ~np.isfinite(kp[..., 2]), 2] = 0.5
         out[done[None, :] & ~use] = np.nan
     return out
+
+
+def detection_status(raw_px, cleaned_px=None):
+    """Per-frame status of the athlete's 2D keypoints (``run.json``: ``keypoint_status``).
+
+    ``no_detection``: no joint in the frame, before or after cleaning (its angles are NaN);
+    ``interpolated``: no joint detected, but the cleaning bridged the frame from its neighbours
+    (a short gap); ``partial``: some joints missing after cleaning (angles that need them are
+    NaN); ``ok``: every joint there.  ``raw_px`` and ``cleaned_px`` (default: ``raw_px``) are
+    ``(F, J, 2 or 3)`` with NaN for missing.
+
+    >>> raw = np.ones((4, 17, 3)); raw[1] = np.nan; raw[2] = np.nan; raw[3, 5] = np.nan
+    >>> cleaned = raw.copy(); cleaned[1] = 1.0
+    >>> detection_status(raw, cleaned)
+    ['ok', 'interpolated', 'no_detection', 'partial']
+    """
+    raw = np.asarray(raw_px, float)[..., :2]
+    cleaned = raw if cleaned_px is None else np.asarray(cleaned_px, float)[..., :2]
+    F = len(raw)
+    raw_none = np.isnan(raw).reshape(F, -1).all(axis=1)
+    gone = np.isnan(cleaned).reshape(F, -1)
+    names = np.array(["no_detection", "interpolated", "partial", "ok"], object)
+    tests = np.column_stack([raw_none & gone.all(axis=1), raw_none, gone.any(axis=1), np.ones(F, bool)])
+    return names[np.argmax(tests, axis=1)].tolist()

@@ -598,7 +598,10 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
         timing = (vel[has] * lag_sd_frames) ** 2 / 2  # per coordinate
         rep = R @ yi  # per coordinate: var = 2 s_v^2 + 2 s_n^2 + timing
         sel = okj[has]
-        sv2 = float(np.mean(np.sum(rep[sel] ** 2, -1) / 2 - timing[sel] - 2 * sn2_all[has][sel])) / 2
+        if sel.any():
+            sv2 = float(np.mean(np.sum(rep[sel] ** 2, -1) / 2 - timing[sel] - 2 * sn2_all[has][sel])) / 2
+        else:  # no stride pair with data: the tie across strides no tighter than the track's own spread
+            sv2 = float(np.mean(np.var(yi, axis=0)))
         sv2 = max(sv2, 0.05 * float(np.median(sn2_all)))
         cvar = 2 * sv2 + timing
         prior = R.T @ sparse.diags(1.0 / cvar) @ R + P2s[float(cut[j])]

@@ -64,7 +64,7 @@ from ..filtering import clean_keypoints, noise_model, stride_lags
 from ..geometry import JOINT_INDEX, SEGMENT_BONES
 from ..geometry.rays import CameraArrays, _as_list
 from ..lifting import LiftConfig
-from ..lifting.trajectory import _runs, fit_ground_track
+from ..lifting.trajectory import _runs, camera_track_config, fit_ground_track
 from .bands import stance_window
 from .heights import HEIGHT_SYSTEMATIC_SD, height_grid, limb_consistency, smear_log_likelihood
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
@@ -417,8 +417,9 @@ class ClipModel(DrawPropagation, EmceeSampling):
                 self.f_ref_grid[g] = float(np.nanmedian(cams.focal_px[cams.valid] / zoom[cams.valid]))
             if cams.valid.sum() < 3:
                 continue
+            pelvis = self.kp[:, JOINT_INDEX["pelvis"], :2]
             tr = fit_ground_track(cams, self.kp, self.fps, contacts=self.contacts,
-                                  config=self._track_config(cams))
+                                  config=camera_track_config(cams, pelvis, self.noise_sd))
             # tempered to one contact's worth: the filter's innovations are not independent
             # (the same feet, seen through one camera path), and its value under wrong
             # heights is dominated by unmodelled effects; undamped it would swamp every
@@ -428,7 +429,10 @@ class ClipModel(DrawPropagation, EmceeSampling):
             # static camera: one lateral position for all frames (residuals relative to the
             # camera-athlete distance, scored once every height is seen: probreg.inference.static)
             ys = cams.C[cams.valid, 1]
-            dist = max(float(np.abs(np.median(ys) - np.nanmedian(tr.position_m[:, 1]))), 1.0)
+            with warnings.catch_warnings():  # no track where this height has cameras: from the track's y = 0
+                warnings.simplefilter("ignore", RuntimeWarning)
+                lateral = np.nanmedian(tr.position_m[:, 1])
+            dist = max(float(np.abs(np.median(ys) - (lateral if np.isfinite(lateral) else 0.0))), 1.0)
             # a frame with lanes whose family has no member at this height (h beyond the
             # frame's branch) counts like a frame 10 % off the common position: otherwise a
             # height reached by a few odd frames only would be scored on those frames alone
@@ -497,29 +501,6 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self.slide_median = med
         # a height where the slide cannot be measured counts as a slide of the running speed
         self.ll_still = np.where(np.isfinite(med), -0.5 * (med / sd) ** 2, -0.5 * (1.0 / sd) ** 2)
-
-    def _track_config(self, cams):
-        """Contact-point noise for this hypothesis: foot placement plus the keypoint noise cast
-        onto the ground (across the track it is magnified by the camera's grazing view)."""
-        from ..lifting import TrackConfig
-
-        ok = cams.valid
-        if not ok.any() or not np.isfinite(self.noise_sd):
-            return TrackConfig()
-        pel = self.kp[:, JOINT_INDEX["pelvis"], :2]
-        from ..geometry import pixel_rays
-
-        rays = pixel_rays(cams, pel[:, None, :])[:, 0]
-        with np.errstate(invalid="ignore", divide="ignore"):
-            t = -cams.C[:, 2] / rays[:, 2]
-            depth = np.nanmedian(t)
-            sin_tilt = np.nanmedian(np.abs(rays[:, 2]))
-            f = np.nanmedian(cams.focal_px)
-        along = self.noise_sd * depth / f
-        across = along / max(sin_tilt, 0.02)
-        base = TrackConfig()
-        return TrackConfig(contact_std_m=(float(np.hypot(base.contact_std_m[0], along)),
-                                          float(np.hypot(base.contact_std_m[1], across))))
 
     def _segment_stats(self, g, cams, tr):
         from ..geometry import pixel_rays

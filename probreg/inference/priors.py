@@ -146,8 +146,16 @@ class ModelPriors:
         Raises
         ------
         ValueError
-            For non-positive values.
+            For non-positive values, or a stature outside 0.5-3 m (the model has no athlete
+            below 0.5 m: a stature of 0, e.g. a missing value, would leave no posterior).
+
+        >>> ModelPriors.from_options(stature=0.0)
+        Traceback (most recent call last):
+        ...
+        ValueError: the athlete's stature must be between 0.5 and 3 m, got 0.0
         """
+        if stature is not None and not (np.isfinite(stature) and 0.5 < stature < 3.0):
+            raise ValueError(f"the athlete's stature must be between 0.5 and 3 m, got {stature}")
         base = cls()
         ch = base.camera_height
         if height is not None or height_sd is not None:

@@ -46,6 +46,11 @@ class SamplerSettings:
     moves: str = "de"
 
     def __post_init__(self):
+        for name in ("n_draws", "max_steps", "chunk"):
+            if int(getattr(self, name)) < 1:
+                raise ValueError(f"{name} must be at least 1, got {getattr(self, name)}")
+        if int(self.burn_in) < 0:
+            raise ValueError(f"burn_in must be at least 0, got {self.burn_in}")
         if int(self.draws_per_noise_copy) < 1:
             raise ValueError(f"draws_per_noise_copy must be at least 1, got {self.draws_per_noise_copy}")
         if self.moves not in MOVES:

@@ -230,6 +230,10 @@ def write_keypoints_json(path, keypoints_px, fmt="h36m17"):
 
 #: frame rates a clip may have (frames per second)
 FPS_RANGE = (1.0, 1000.0)
+
+#: accepted ``lane_width_m`` (m): World Athletics lanes are 1.22 m wide (1.25 m on older tracks); the
+#: range only stops a typo or a sign error, which would otherwise leave every frame without a camera
+LANE_WIDTH_RANGE_M = (0.5, 3.0)
 #: image file endings read as frames
 IMAGE_SUFFIXES = (".jpg", ".jpeg", ".png")
 _FRAME_NAME = re.compile(r"\d+")
@@ -299,7 +303,8 @@ def load_clip(path, min_score=0.0):
     ``missing_image`` downstream), a file that is not named by a frame number is ignored with
     a note, and two files with one number are an error.  Keypoints more than one image size
     outside the image (absurd coordinates) are treated as missing, with a note and a count
-    per frame (:attr:`Clip.keypoints_outside`).
+    per frame (:attr:`Clip.keypoints_outside`).  Frames without any detected joint are counted in a
+    note (the run's ``keypoint_status`` says which).
 
     Parameters
     ----------
@@ -311,7 +316,8 @@ def load_clip(path, min_score=0.0):
     ------
     ClipFormatError
         If the folder, ``clip.json`` or ``keypoints2d.json`` is missing or malformed; if
-        ``fps`` is not within :data:`FPS_RANGE`; if ``image_size`` disagrees with the frames;
+        ``fps`` is not within :data:`FPS_RANGE` or ``lane_width_m`` within
+        :data:`LANE_WIDTH_RANGE_M`; if ``image_size`` disagrees with the frames;
         if keypoint scores lie outside [0, 1]; if two images carry one frame number.
     """
     path = Path(path)
@@ -332,6 +338,9 @@ def load_clip(path, min_score=0.0):
     lane = meta.get("athlete_lane")
     if lane is not None and (not isinstance(lane, int) or not 1 <= lane <= 9):
         raise ClipFormatError(f"{cj}: athlete_lane must be a lane number 1..9")
+    if meta.get("lane_width_m") is not None:
+        _check_number(meta, "lane_width_m", cj, *LANE_WIDTH_RANGE_M,
+                      "the lane width in metres (1.22 on a standard track)")
     if meta.get("n_frames") is not None:
         _check_number(meta, "n_frames", cj, 1, 10_000_000, "a whole number of frames")
         if meta["n_frames"] != int(meta["n_frames"]):
@@ -366,6 +375,11 @@ def load_clip(path, min_score=0.0):
         if min_score > 0:
             kp[kp[..., 2] < min_score] = np.nan
         n = len(kp)
+        empty = np.flatnonzero(np.all(np.isnan(kp[..., :2]).reshape(n, -1), axis=1))
+        if len(empty):
+            notes.append(f"{path / 'keypoints2d.json'}: no detected joint in {len(empty)} of {n} frames (first: "
+                         f"frame {empty[0]}); their angles are NaN unless a short gap is bridged "
+                         f"(run.json: keypoint_status)")
     frame_paths = [found.get(i) for i in range(n)] if found and n else []
     missing = [i for i, p in enumerate(frame_paths) if p is None]
     if missing:

@@ -16,6 +16,7 @@ from .raycast import (
 from .trajectory import (
     GroundTrack,
     TrackConfig,
+    camera_track_config,
     cast_ankles,
     detect_contacts,
     fit_ground_track,
@@ -26,7 +27,7 @@ from .trajectory import (
 
 __all__ = [
     "LiftConfig", "LiftResult", "estimate_segments", "lift", "smooth_angles_across_strides",
-    "ANTHROPOMETRIC_RATIOS", "GroundTrack", "TrackConfig", "cast_ankles", "detect_contacts",
+    "ANTHROPOMETRIC_RATIOS", "GroundTrack", "TrackConfig", "camera_track_config", "cast_ankles", "detect_contacts",
     "fit_ground_track", "sagittal_ankle_points", "sagittal_ankle_height",
     "gate_contacts_by_height",
 ]

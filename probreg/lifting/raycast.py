@@ -348,6 +348,39 @@ def smooth_angles_across_strides(joints_track_m, forward, lag, fps, rho=0.0, smo
     return j, info
 
 
+#: the segment lengths the lifting uses (its spheres' radii)
+LIFTED_SEGMENTS = ("hip_width", "shoulder_width", "thigh", "shank", "upper_arm", "forearm")
+
+
+def _given_segments(segments_m):
+    """The user's segment lengths as floats, checked: known names, positive finite metres.
+
+    >>> _given_segments({"thigh": "0.45"})
+    {'thigh': 0.45}
+    >>> _given_segments({"thigh": -1})
+    Traceback (most recent call last):
+    ...
+    ValueError: segment length 'thigh' must be a positive length in metres, got -1
+    """
+    if segments_m is None:
+        return {}
+    if not isinstance(segments_m, dict):
+        raise ValueError(f"segment lengths must be a mapping of segment name to metres, got {type(segments_m).__name__}")
+    unknown = sorted(set(segments_m) - set(SEGMENT_BONES))
+    if unknown:
+        raise ValueError(f"unknown segment(s) {', '.join(map(repr, unknown))}; known: {', '.join(SEGMENT_BONES)}")
+    out = {}
+    for k, v in segments_m.items():
+        try:
+            x = float(v)
+        except (TypeError, ValueError):
+            x = float("nan")
+        if not (np.isfinite(x) and 0 < x < 3):
+            raise ValueError(f"segment length {k!r} must be a positive length in metres, got {v!r}")
+        out[k] = x
+    return out
+
+
 def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | None = None,
          config: LiftConfig = LiftConfig(), stride_lag=None):
     """Lift 2D keypoints to 3D joints in the track frame.
@@ -359,8 +392,8 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
         H36M-17 ``(x, y, score)``; NaN or low-score joints are missing.
     fps : float
     segments_m : dict, optional
-        Segment lengths keyed as :data:`probreg.geometry.skeleton.SEGMENT_BONES`; estimated from
-        the clip (:func:`estimate_segments`) when not given.
+        Segment lengths (m) keyed as :data:`probreg.geometry.skeleton.SEGMENT_BONES`; those not
+        given are estimated from the clip (:func:`estimate_segments`).
     track : GroundTrack, optional
         Precomputed ground track (else fitted here).
     config : LiftConfig
@@ -377,7 +410,8 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
     Raises
     ------
     ValueError
-        If the keypoints do not have shape (F, 17, 2|3) or the camera count differs.
+        If the keypoints do not have shape (F, 17, 2|3) or the camera count differs, or a given
+        segment length is unknown, not positive or not a number.
     """
     kp = np.array(keypoints_px, float)
     if kp.ndim != 3 or kp.shape[1] != 17 or kp.shape[2] not in (2, 3):
@@ -399,9 +433,9 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
         raise ValueError(f"{len(cams.valid)} cameras for {F} frames of keypoints")
     if track is None:
         track = fit_ground_track(cams, kp, fps, ankle_height_m=config.ankle_height_m)
-    if segments_m is None:
-        segments_m = estimate_segments(cams, kp, track, fps)
-    seg = {k: float(v) for k, v in segments_m.items()}
+    seg = _given_segments(segments_m)
+    if not set(LIFTED_SEGMENTS) <= set(seg):  # the lengths not given are estimated from the clip
+        seg = {**estimate_segments(cams, kp, track, fps), **seg}
     origins = cams.C
     rays = pixel_rays(cams, kp[..., :2])  # (F, 17, 3), NaN where missing
     left = track.left

@@ -20,7 +20,8 @@ import numpy as np
 
 from ..geometry import JOINT_INDEX
 
-__all__ = ["GroundTrack", "TrackConfig", "cast_ankles", "detect_contacts", "fit_ground_track", "sagittal_ankle_points", "sagittal_ankle_height", "gate_contacts_by_height"]
+__all__ = ["GroundTrack", "TrackConfig", "camera_track_config", "cast_ankles", "detect_contacts", "fit_ground_track",
+           "sagittal_ankle_points", "sagittal_ankle_height", "gate_contacts_by_height"]
 
 
 @dataclass(frozen=True)
@@ -67,6 +68,33 @@ class TrackConfig:
     max_gap_s: float = 0.1
     contact_height_margin_m: float | None = 0.06
     max_rejected_run: int = 2
+
+
+def camera_track_config(cams, pelvis_px, noise_px):
+    """Contact-point noise of the ground-track filter under one camera hypothesis: the foot
+    placement of :class:`TrackConfig` plus the keypoint noise (``noise_px``, per coordinate) cast
+    onto the ground, across the track magnified by the camera's grazing view.
+
+    ``cams``: per-frame :class:`~probreg.geometry.CameraArrays`; ``pelvis_px`` (F, 2).  Where it
+    cannot be computed (no camera, no pelvis in a frame that has one, unknown noise) the default
+    :class:`TrackConfig`.
+    """
+    from ..geometry import pixel_rays
+
+    base = TrackConfig()
+    if not np.any(cams.valid) or not np.isfinite(noise_px):
+        return base
+    rays = pixel_rays(cams, np.asarray(pelvis_px, float)[:, None, :])[:, 0]
+    with np.errstate(invalid="ignore", divide="ignore"), warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)  # all NaN: no pelvis where there are cameras
+        depth = np.nanmedian(-cams.C[:, 2] / rays[:, 2])
+        sin_tilt = np.nanmedian(np.abs(rays[:, 2]))
+        along = noise_px * depth / np.nanmedian(cams.focal_px)
+    across = along / max(sin_tilt, 0.02)
+    if not (np.isfinite(along) and np.isfinite(across)):
+        return base
+    return TrackConfig(contact_std_m=(float(np.hypot(base.contact_std_m[0], along)),
+                                      float(np.hypot(base.contact_std_m[1], across))))
 
 
 @dataclass(frozen=True)

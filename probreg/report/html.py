@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 
 from ..geometry import BONES, JOINT_INDEX, joint_angles
+from ..io.frames import read_frame
 
 __all__ = ["HtmlReport", "draw_skeleton", "clip_report", "run_report", "uncalibrated_report", "gait_cycle_figure",
            "prior_posterior_figure", "status_strip_figure", "sampler_figure",
@@ -130,7 +131,7 @@ def clip_report(clip_dir, out_html):
     ])
     if clip.frame_paths:
         mid = len(clip.frame_paths) // 2
-        img = cv2.imread(str(clip.frame_paths[mid]))
+        img = read_frame(clip, mid)
         if img is not None:
             draw_skeleton(img, gt.joints2d_px[mid], (0, 255, 0))
             if clip.keypoints_px is not None:
@@ -262,7 +263,7 @@ def run_report(out_html, clip, result, joints_median, cameras):
               [[k, v["median"], v["lo"], v["hi"], GAIT_FIELDS.get(k, "")] for k, v in result.gait.items()])
     if clip.frame_paths:
         mid = len(clip.frame_paths) // 2
-        img = cv2.imread(str(clip.frame_paths[mid]))
+        img = read_frame(clip, mid)
         if img is not None and cameras[mid] is not None and np.all(np.isfinite(joints_median[mid])):
             draw_skeleton(img, cameras[mid].project(joints_median[mid]), (0, 255, 0))
             if clip.keypoints_px is not None:
@@ -274,7 +275,7 @@ def run_report(out_html, clip, result, joints_median, cameras):
         n = len(clip.frame_paths)
         thumbs = []
         for i in sorted({0, n // 3, 2 * n // 3, n - 1}):
-            img = cv2.imread(str(clip.frame_paths[i]))
+            img = read_frame(clip, i)
             if img is not None:
                 fl = result.model.reg.frame_lanes[i]
                 thumbs.append(cv2.resize(draw_lanes(img, fl), (480, int(480 * img.shape[0] / img.shape[1]))))
@@ -315,7 +316,7 @@ def uncalibrated_report(out_html, clip, registration, result):
     if clip.frame_paths:
         n = len(clip.frame_paths)
         for i in sorted({0, n // 2, n - 1}):
-            img = cv2.imread(str(clip.frame_paths[i]))
+            img = read_frame(clip, i)
             if img is None:
                 continue
             fl = registration.frame_lanes[i]

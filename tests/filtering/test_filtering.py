@@ -234,3 +234,30 @@ def test_common_reference_ignores_a_missing_trunk_joint(runner_views):
 
     assert jumps(trunk2 - trunk) > 5.0
     assert jumps(part - full) < 0.5
+
+
+def test_a_joint_without_any_stride_pair_is_still_smoothed(runner_views, monkeypatch):
+    """Keypoints only in the first half of a clip whose stride lags are known only in the second
+    (a bootstrap copy of a clip whose athlete leaves the picture): no detected frame has a partner
+    one stride later.  The stride-to-stride variance was then a mean over nothing (NaN), which
+    made every joint's fit NaN with a "Mean of empty slice" warning."""
+    import warnings
+
+    from probreg.filtering import periodic
+
+    _, truth, noisy = runner_views
+    F = 160
+    kp = noisy[:F].copy()
+    kp[F // 2:] = np.nan
+    lag = np.full(F, np.nan)
+    lag[F // 2:] = 35.0
+    monkeypatch.setattr(periodic, "_lags_of", lambda rel_t, fps, min_strides: lag)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error", RuntimeWarning)
+        sm = periodic_smooth(kp, 50.0)
+    assert sm is not None
+    seen = sm[: F // 2, :, :2]
+    assert np.all(np.isfinite(seen))
+    # still a smoothing of the data: closer to the truth than the noisy detections
+    err = lambda x: np.sqrt(np.mean((x - truth[: F // 2, :, :2]) ** 2))  # noqa: E731
+    assert err(seen) < err(noisy[: F // 2, :, :2])

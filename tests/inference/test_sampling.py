@@ -53,3 +53,10 @@ def test_de_moves_mix_faster_on_correlated_posterior():
 def test_unknown_moves_are_a_clear_error():
     with pytest.raises(ValueError, match="moves must be one of"):
         SamplerSettings(moves="gibbs")
+
+
+@pytest.mark.parametrize("field", ["n_draws", "max_steps", "chunk"])
+def test_an_empty_budget_is_a_clear_error(field):
+    """``--draws 0`` once ran the whole sampler and then failed with "noise_copies is empty"."""
+    with pytest.raises(ValueError, match=f"{field} must be at least 1"):
+        SamplerSettings(**{field: 0})

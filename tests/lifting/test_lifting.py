@@ -88,6 +88,25 @@ def test_missing_detections_and_cameras_get_statuses(exact):
     assert np.all(np.isfinite(res.joints_track_m[21]))
 
 
+def test_given_segment_lengths_are_checked_and_the_missing_ones_estimated(exact, tmp_path, small_clip, capsys):
+    """A partial ``--segments`` file (only the legs measured) once crashed the lifting with a
+    KeyError deep inside it, and a negative length went through."""
+    clip, gt, j2 = exact
+    res = lift(gt.cameras, j2, clip.fps, segments_m={"thigh": 0.5})
+    est = estimate_segments(gt.cameras, j2, res.track, clip.fps)
+    assert res.segments_m["thigh"] == 0.5
+    assert res.segments_m["shank"] == pytest.approx(est["shank"]) and "hip_width" in res.segments_m
+    for bad, msg in (({"thigh": -0.4}, "positive length"), ({"thigh": "long"}, "positive length"),
+                     ({"femur": 0.45}, "unknown segment")):
+        with pytest.raises(ValueError, match=msg):
+            lift(gt.cameras, j2, clip.fps, segments_m=bad)
+    (tmp_path / "seg.json").write_text(json.dumps({"segments_m": {"thigh": float("nan")}}))
+    code = main(["lift", str(small_clip), "--cameras", str(small_clip / "groundtruth" / "cameras.json"),
+                 "--segments", str(tmp_path / "seg.json"), "--out", str(tmp_path / "o")])
+    err = capsys.readouterr().err
+    assert code == 2 and "Traceback" not in err and "'thigh' must be a positive length" in err
+
+
 def test_lift_rejects_bad_shapes(exact):
     clip, gt, j2 = exact
     with pytest.raises(ValueError, match="shape"):

@@ -32,3 +32,18 @@ def test_notebook_executes_and_shows_figures(path, tmp_path, monkeypatch):
         bands = [c for c in nb.cells if c.cell_type == "code" and "fill_between" in c.source]
         assert bands and _images(bands[0]) >= 1
         assert (tmp_path / "nb_result" / "gait_cycle.csv").exists()
+
+
+@pytest.mark.parametrize("path", NOTEBOOKS, ids=[p.stem for p in NOTEBOOKS])
+def test_notebook_is_valid_nbformat_with_cell_ids(path):
+    """Cells without an id are a MissingIDFieldWarning now and a hard error in nbformat's next
+    versions; every cell has a unique one and the notebook validates without warnings."""
+    import json
+    import warnings
+
+    doc = json.loads(path.read_text(encoding="utf-8"))
+    ids = [c.get("id") for c in doc["cells"]]
+    assert all(ids) and len(set(ids)) == len(ids)
+    with warnings.catch_warnings():
+        warnings.simplefilter("error")
+        nbformat.validate(nbformat.reads(path.read_text(encoding="utf-8"), as_version=4))

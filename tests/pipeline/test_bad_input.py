@@ -193,6 +193,8 @@ def test_run_end_to_end_with_missing_image_stray_file_and_absurd_keypoint(clip, 
     shutil.copy(clip / "frames" / "000007.jpg", clip / "frames" / "Thumbs.jpg")
     doc = json.loads((clip / "keypoints2d.json").read_text())
     doc["frames"][12]["keypoints"][2][0] = 1e10
+    for i in (26, 27, 36, 37, 38, 39):  # no athlete: a short gap, and the clip's last four frames
+        doc["frames"][i]["keypoints"] = [[None, None, 0.0]] * 17
     (clip / "keypoints2d.json").write_text(json.dumps(doc))
     out = tmp_path / "res ü"  # a space and a non-ASCII name on the way
     code = main(["run", str(clip), "--out", str(out), "--dist=-0.1,0,0,0,0"] + FAST_RUN)
@@ -206,7 +208,20 @@ def test_run_end_to_end_with_missing_image_stray_file_and_absurd_keypoint(clip, 
     assert run["frame_status"][19] == "ok" and run["frame_status"][21] == "ok"
     assert run["keypoints_outside_image"][12] == 1 and sum(run["keypoints_outside_image"]) == 1
     assert any("Thumbs.jpg" in n for n in run["input_notes"])
+    assert any("no detected joint in 6 of 40 frames (first: frame 26)" in n for n in run["input_notes"])
     assert (out / "report.html").exists() and (out / "angles.csv").exists()
+    # why a frame has no angles: its keypoints' status, consistent with angles.csv
+    kst = run["keypoint_status"]
+    assert len(kst) == 40 and kst.count("ok") >= 30
+    assert kst[36:] == ["no_detection"] * 4  # nothing after them to bridge from
+    assert set(kst[26:28]) <= {"interpolated", "no_detection"}
+    frames, knee = read_angles_csv(out / "angles.csv")["knee_r"][:2]
+    by_frame = dict(zip(frames.astype(int).tolist(), knee.tolist()))
+    for i, st in enumerate(kst):
+        if st == "no_detection":
+            assert np.isnan(by_frame.get(i, np.nan)), i
+        elif st == "ok":
+            assert np.isfinite(by_frame[i]), i
 
 
 # ----------------------------------------------------------------------------- 5. metadata
@@ -217,6 +232,27 @@ def test_fps_outside_the_accepted_range_is_a_clear_error(clip, tmp_path, capsys,
     (clip / "clip.json").write_text(json.dumps(doc).replace(f'"fps": {json.dumps(doc["fps"])}', f'"fps": {fps}'))
     assert main(["run", str(clip), "--out", str(tmp_path / "o")]) == 2
     _one_error_line(capsys, "clip.json", "'fps'", "between 1 and 1000")
+
+
+@pytest.mark.parametrize("width", ["-1.22", "0", "122", "\"wide\"", "NaN"])
+def test_an_impossible_lane_width_is_a_clear_error(clip, tmp_path, capsys, width):
+    """A sign error or a typo in ``lane_width_m`` once left every frame without a camera and the
+    run 'uncalibrated', with nothing naming the cause."""
+    doc = json.loads((clip / "clip.json").read_text())
+    doc["lane_width_m"] = 0.0
+    (clip / "clip.json").write_text(json.dumps(doc).replace('"lane_width_m": 0.0', f'"lane_width_m": {width}'))
+    assert main(["run", str(clip), "--out", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, "clip.json", "'lane_width_m'", "between 0.5 and 3")
+    assert not (tmp_path / "o").exists()
+
+
+@pytest.mark.parametrize("option", [["--fps", "-3"], ["--stature", "0"], ["--draws", "0"]])
+def test_impossible_run_options_are_refused_before_the_work(clip, tmp_path, capsys, option):
+    """Each was taken: --fps -3 silently (a clip folder has its own rate), --stature 0 ended
+    'uncalibrated' with no posterior, --draws 0 failed after the sampling."""
+    assert main(["run", str(clip), "--out", str(tmp_path / "o")] + option) == 2
+    _one_error_line(capsys, "must be")
+    assert not (tmp_path / "o").exists()
 
 
 def test_wrong_or_swapped_image_size_is_found(clip, tmp_path, capsys):
