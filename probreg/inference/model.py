@@ -411,13 +411,13 @@ class ClipModel(DrawPropagation, EmceeSampling):
         # the clip's reference focal length (zoom ratios removed) at every grid height
         self.f_ref_grid = np.full(G, np.nan)
         zoom = self.lens.evidence.zoom if self.lens is not None else np.ones(self.F)
+        pelvis = self.kp[:, JOINT_INDEX["pelvis"], :2]
         for g, h in enumerate(self.grid):
             cams = self.cameras_at(h)
             if cams.valid.any():
                 self.f_ref_grid[g] = float(np.nanmedian(cams.focal_px[cams.valid] / zoom[cams.valid]))
             if cams.valid.sum() < 3:
                 continue
-            pelvis = self.kp[:, JOINT_INDEX["pelvis"], :2]
             tr = fit_ground_track(cams, self.kp, self.fps, contacts=self.contacts,
                                   config=camera_track_config(cams, pelvis, self.noise_sd))
             # tempered to one contact's worth: the filter's innovations are not independent
