@@ -18,7 +18,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["HEIGHT_SYSTEMATIC_SD", "LIMB_SPREAD_FLOOR", "height_grid", "limb_consistency", "smear_log_likelihood"]
+__all__ = ["HEIGHT_SYSTEMATIC_SD", "LIMB_SPREAD_FLOOR", "height_grid", "identity_height", "limb_consistency",
+           "smear_log_likelihood"]
 
 #: relative distances below the frames' typical lowest top (see :func:`height_grid`) at which
 #: extra grid points go
@@ -180,3 +181,35 @@ def limb_consistency(spread, count, frames_per_sample=10.0, floor=LIMB_SPREAD_FL
     if total is None:
         return np.zeros(len(next(iter(spread.values()), ())))
     return total
+
+
+def identity_height(heights, sensitivity, coverage, h_ref, max_sensitivity=2.0, min_share=0.9):
+    """The camera height at which the lane lines' identities are settled from frame to frame.
+
+    A followed line that slips to its neighbour moves a frame's member sideways by exactly one
+    lane at *every* height, so the identities can be checked at any height where the members are
+    well conditioned.  Towards the top of the family (the fold) they are not: every member is
+    hypersensitive to its lines, neighbouring frames' lateral positions differ by a large part
+    of a lane and noise passes for a slip (and frames without a member there keep offset 0).
+    The reference height ``h_ref`` (the best height of a first pass) can sit right there.
+
+    Returned: ``h_ref`` when its members are well conditioned (``sensitivity``, ``|d log f /
+    d log h|``, at most ``max_sensitivity``, and a member in at least ``min_share`` of the best
+    ``coverage``), else the height of ``heights`` nearest to it (in log) that is; ``h_ref`` when
+    none is.  ``sensitivity`` and ``coverage`` are functions of the height.
+
+    >>> sens = lambda h: 1.0 if h < 20 else 8.0  # the fold near 20 m
+    >>> cover = lambda h: 100 if h < 24 else 10
+    >>> [identity_height([5.0, 10.0, 15.0, 22.0, 25.0], sens, cover, h) for h in (12.0, 22.0, 25.0)]
+    [12.0, 15.0, 15.0]
+    """
+    def good(h, best):
+        s = sensitivity(h)
+        return np.isfinite(s) and s <= max_sensitivity and coverage(h) >= min_share * best
+
+    cand = np.unique(np.r_[np.asarray(heights, float), h_ref])
+    best = max(coverage(h) for h in cand)
+    if good(h_ref, best):
+        return float(h_ref)
+    ok = [h for h in cand if good(h, best)]
+    return float(min(ok, key=lambda h: abs(np.log(h / h_ref)))) if ok else float(h_ref)

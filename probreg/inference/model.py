@@ -66,7 +66,7 @@ from ..geometry.rays import CameraArrays, _as_list
 from ..lifting import LiftConfig
 from ..lifting.trajectory import _runs, camera_track_config, fit_ground_track
 from .bands import stance_window
-from .heights import HEIGHT_SYSTEMATIC_SD, height_grid, limb_consistency, smear_log_likelihood
+from .heights import HEIGHT_SYSTEMATIC_SD, height_grid, identity_height, limb_consistency, smear_log_likelihood
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
 from .parallel import default_workers, fork_map
 from .propagation import DrawPropagation
@@ -176,6 +176,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
             raise NoCalibrationError(f"the prior's camera heights ({plo:.1f}-{phi:.1f} m) do not overlap the "
                                      f"heights the lanes allow ({lo:.1f}-{hi:.1f} m)", "no_plausible_height")
         self.h_ref = float(np.clip(priors.camera_height.centre(), g_lo, g_hi))
+        self._id_range = (g_lo, g_hi)
         self._fix_offsets()
         # refined below the frames' branch tops (probreg.inference.heights)
         self.grid = height_grid(g_lo, g_hi, n_grid, np.nanmax(self.h[self.valid], axis=1))
@@ -363,7 +364,8 @@ class ClipModel(DrawPropagation, EmceeSampling):
         return CameraArrays(valid=valid, C=C, R=R, focal_px=f, principal_px=self.pp, dist=dist)
 
     def _fix_offsets(self, final=False):
-        """Lane-index offsets (frame to frame and to the athlete's lane) at the reference height."""
+        """Lane-index offsets (frame to frame and to the athlete's lane) at the reference height, or the
+        nearest well-conditioned one (:func:`probreg.inference.heights.identity_height`)."""
         reg = self.reg
         seq = reg.sequence
         seq.branch = self.branch
@@ -384,8 +386,11 @@ class ClipModel(DrawPropagation, EmceeSampling):
         if odd and len(odd) < self.valid.sum() - 2:
             self.valid[odd] = False
             self.inconsistent[odd] = True
-        self.offsets = np.asarray(reg.track_offsets(seq, self.h_ref), int)
-        cams = self.cameras_at(self.h_ref, offsets=self.offsets)
+        lo, hi = self._id_range  # where the lines' identities are settled
+        h_id = self._identity_h = identity_height(np.geomspace(lo, hi, 17), self.member_sensitivity, lambda h: int(
+            np.isfinite(self._focal_at(h)[self.valid]).sum()), self.h_ref)
+        self.offsets = np.asarray(reg.track_offsets(seq, h_id), int)
+        cams = self.cameras_at(h_id, offsets=self.offsets)
         self.offsets = self.offsets + lane_anchor_shift(athlete_ground_track(_as_list(cams), self.kp),
                                                         self.athlete_lane, reg.lane_width_m)
 

@@ -375,7 +375,7 @@ def _given_segments(segments_m):
             x = float(v)
         except (TypeError, ValueError):
             x = float("nan")
-        if not (np.isfinite(x) and 0 < x < 3):
+        if not (np.isfinite(x) and x > 0):  # no upper bound: posterior draws may be absurd, not wrong input
             raise ValueError(f"segment length {k!r} must be a positive length in metres, got {v!r}")
         out[k] = x
     return out

@@ -403,6 +403,20 @@ def test_member_sensitivity_is_small_for_a_broadcast_camera_and_grows_at_the_fam
     assert np.isnan(m.member_sensitivity(10 * top))  # no frame has a member there
 
 
+def test_line_identities_are_settled_away_from_the_family_top(model):
+    """The lines' frame-to-frame identities are settled where the members scatter least, not at
+    the reference height (which can sit at the family's fold, where every member is
+    hypersensitive): there the camera must not jump sideways by a lane between frames."""
+    m, gt = model
+    top = float(np.nanmedian(np.nanmax(m.h[m.valid], axis=1)))
+    assert m._identity_h < 0.9 * top
+    assert m.member_sensitivity(m._identity_h) < 3.0
+    for h in (gt.cameras[0].C[2], m._identity_h):
+        cams = m.cameras_at(h)
+        y = cams.C[cams.valid, 1]
+        assert np.all(np.abs(np.diff(y)) < 0.5 * 1.22)
+
+
 def test_no_noise_copies_are_made_without_a_known_noise_level(model, monkeypatch):
     """Keypoints whose noise level is unknown (or zero) are not re-noised: the pipeline then
     starts no noise copies at all, as propagate adds no noise."""
