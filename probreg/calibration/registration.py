@@ -520,7 +520,7 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
     ``started()``, when given, is called once the background work is started (threads must
     start only then: a fork while another thread holds an import lock could hang).
     """
-    from ..io.frames import iter_frames, read_frame
+    from ..io.frames import iter_frames
     from ..lanes.tracking import stitch_tracks
 
     kp = clip.keypoints_px if mask_athlete else None
@@ -532,22 +532,15 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
     mid = int(n * SPLIT_SHARE) // step * step if background is not None and clip.frame_paths \
         and n >= SPLIT_MIN_FRAMES else n
     mid = mid if 0 < mid < n else n
-    # frames whose lines are only followed are decoded grey (the luma the lines are measured
-    # in, half the decoding time); those detected in full in colour
-    every = step if clip.frame_paths else None
-
-    def colour(i):
-        return read_frame(clip, i)
-
-    second = background(lambda: track_lanes(iter_frames(clip, start=mid, colour_every=every), config,
-                                            keypoints_px=kp, colour=colour)) if mid < n else None
+    second = background(lambda: track_lanes(iter_frames(clip, start=mid), config, keypoints_px=kp)) \
+        if mid < n else None
     if started is not None:
         started()
     bar = progress("lanes", n) if progress is not None else None
-    frames = iter_frames(clip, mid, colour_every=every)
+    frames = iter_frames(clip, mid)
     try:
         fls = []
-        for fl in track_lanes(frames, config, keypoints_px=kp, colour=colour):
+        for fl in track_lanes(frames, config, keypoints_px=kp):
             fls.append(fl)
             if bar is not None:
                 bar.update(1)

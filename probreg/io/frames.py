@@ -16,21 +16,19 @@ def has_frames(clip: Clip):
     return any(p is not None for p in clip.frame_paths) or clip.video_path is not None
 
 
-def _imread(path, grey=False):
-    return None if path is None else cv2.imread(str(path), cv2.IMREAD_GRAYSCALE if grey else cv2.IMREAD_COLOR)
+def _imread(path):
+    return None if path is None else cv2.imread(str(path), cv2.IMREAD_COLOR)
 
 
 #: images decoded ahead of the consumer (a few frames: bounded memory at any image size)
 PREFETCH = 4
 
 
-def _prefetched(paths, n, start=0, colour_every=None):
+def _prefetched(paths, n, start=0):
     """``(i, image or None)`` for ``start <= i < n``, decoded on a background thread while the caller
     works on the previous frames (OpenCV releases the GIL while it decodes, so decoding, a
     third of the lane step's time at 1080p, overlaps the lane measurement).  The same images
-    in the same order as decoding them one by one.  With ``colour_every``, only every
-    ``colour_every``-th frame from ``start`` on is decoded in colour, the others as their grey
-    (luma) plane, which a JPEG stores as it is: half the decoding time."""
+    in the same order as decoding them one by one."""
     from collections import deque
     from concurrent.futures import ThreadPoolExecutor
 
@@ -38,8 +36,7 @@ def _prefetched(paths, n, start=0, colour_every=None):
     with ThreadPoolExecutor(max_workers=1, thread_name_prefix="probreg-decode") as pool:
         pending = deque()
         for i in range(start, n):
-            grey = bool(colour_every) and (i - start) % colour_every != 0
-            pending.append(pool.submit(_imread, paths[i], grey) if i < len(paths) else None)
+            pending.append(pool.submit(_imread, paths[i]) if i < len(paths) else None)
             if len(pending) > PREFETCH:
                 j = i - PREFETCH
                 fut = pending.popleft()
@@ -66,11 +63,9 @@ def read_frame(clip: Clip, index):
     return None
 
 
-def iter_frames(clip: Clip, n_frames=None, start=0, colour_every=None):
+def iter_frames(clip: Clip, n_frames=None, start=0):
     """Yield ``(index, image or None)`` for every frame of the clip (``None``: missing or
     unreadable), from frame ``start`` on (image folders only; a video is read from its start).
-    Images are BGR; with ``colour_every`` (image folders), all but every ``colour_every``-th
-    frame from ``start`` are grey (2-D) instead.
 
     Raises
     ------
@@ -79,7 +74,7 @@ def iter_frames(clip: Clip, n_frames=None, start=0, colour_every=None):
     """
     n = clip.n_frames if n_frames is None else n_frames
     if clip.frame_paths:
-        yield from _prefetched(clip.frame_paths, n, start, colour_every)
+        yield from _prefetched(clip.frame_paths, n, start)
         return
     if start:
         raise ValueError("a video is read from its first frame")

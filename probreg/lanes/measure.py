@@ -120,8 +120,7 @@ def _measure_lines(image_bgr, endpoint_sets, cfg, exclude=None):
     h, w = image_bgr.shape[:2]
     # per line: reading direction, profile half-width and the columns (rows) it crosses;
     # lines alike in both are measured in one batch (one gather, one centroid pass)
-    grey = image_bgr.ndim == 2  # the luma plane itself
-    pixels = image_bgr.reshape(-1) if grey else image_bgr.reshape(-1, 3)  # flat: a 1-D gather is faster
+    pixels = image_bgr.reshape(-1, 3)  # flat indexing: a 1-D gather is faster than a 2-D one
     plans, groups = [], {}
     crowded = _crowded(endpoint_sets, 2 * cfg.profile_half_px)
     for k, endpoints in enumerate(endpoint_sets):
@@ -149,8 +148,7 @@ def _measure_lines(image_bgr, endpoint_sets, cfg, exclude=None):
         X, Y = (major_i, minor) if horizontal else (minor, major_i)
         inside = (X.min(1) >= 0) & (Y.min(1) >= 0) & (X.max(1) <= w - 1) & (Y.max(1) <= h - 1)
         flat_idx = (np.clip(Y, 0, h - 1) * w + np.clip(X, 0, w - 1)).ravel()
-        prof = (np.take(pixels, flat_idx).reshape(minor.shape).astype(np.float32) if grey else
-                np.take(pixels, flat_idx, axis=0).reshape(minor.shape + (3,)) @ _LUMA_BGR)
+        prof = np.take(pixels, flat_idx, axis=0).reshape(minor.shape + (3,)) @ _LUMA_BGR
         counts = [len(plans[k][0]) for k in members]
         line_id = np.repeat(np.arange(len(members)), counts)
         off, ok = _profile_centroids(prof, offs.astype(float), cfg.threshold * 0.6, line_id, major,

@@ -25,7 +25,7 @@ from .types import FrameLanes, LaneDetectorConfig
 __all__ = ["track_lanes", "stitch_tracks"]
 
 
-def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypoints_px=None, colour=None):
+def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypoints_px=None):
     """Lanes of a frame sequence, following the lines from frame to frame.
 
     The broadcast camera moves smoothly, so each frame's lines are first
@@ -37,15 +37,10 @@ def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypo
     Parameters
     ----------
     frames : iterable of (index, image or None)
-        BGR images, or grey (2-D) ones where lines are only followed: a full detection needs
-        colour (white lines are bright in every channel) and gets it from ``colour``.
     config : LaneDetectorConfig
     keypoints_px : ndarray (F, 17, 2 or 3), optional
         The athlete's 2-D keypoints by frame index: line evidence near the athlete
         (:func:`athlete_mask`) is ignored.
-    colour : callable, optional
-        ``colour(index)`` -> the frame in BGR (or None), for a grey frame that needs a full
-        detection; without it a grey frame is detected as its grey copied to three channels.
 
     Returns
     -------
@@ -61,13 +56,13 @@ def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypo
         small = None
         exclude = (athlete_mask(keypoints_px[i]) if keypoints_px is not None and 0 <= i < len(keypoints_px)
                    else None)
-        if img is not None and getattr(img, "ndim", 0) in (2, 3) and img.size:
+        if img is not None and getattr(img, "ndim", 0) == 3 and img.size:
             # global image motion from the previous frame (phase correlation of a small grey
             # copy): predicts where the lines went when the camera pans or shakes
             scale = 320.0 / img.shape[1]
             step = max(1, img.shape[1] // 640)  # cheap pre-decimation; phase correlation is coarse anyway
             # grey first: the strided copy of one channel is a third of the colour one's
-            small = cv2.resize((img if img.ndim == 2 else cv2.cvtColor(img, cv2.COLOR_BGR2GRAY))[::step, ::step],
+            small = cv2.resize(cv2.cvtColor(img, cv2.COLOR_BGR2GRAY)[::step, ::step],
                                (320, max(8, int(round(img.shape[0] * scale)))),
                                interpolation=cv2.INTER_AREA).astype(np.float32)
             if prev_small is not None and prev_small.shape == small.shape:
@@ -96,8 +91,6 @@ def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypo
                         max(ln.rms_px for ln in fl.lines) > _track_rms_bound(prev, config):
                     fl = None
         if fl is None:
-            if img is not None and getattr(img, "ndim", 0) == 2:  # a full detection needs colour
-                img = colour(i) if colour is not None else cv2.cvtColor(img, cv2.COLOR_GRAY2BGR)
             fl = detect_lanes(img, config, frame=i, exclude=exclude)
         if fl.ok:
             ref = prev if prev is not None else last_ok

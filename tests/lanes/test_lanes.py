@@ -128,38 +128,6 @@ def test_tracking_keeps_line_identities_and_smoothing_keeps_statuses(cam):
     assert "vp_raw" in sm[0].extra
 
 
-def test_followed_frames_measured_in_the_grey_plane_give_the_colour_frames_lines(cam):
-    """Frames whose lines are only followed may come as the JPEG's grey (luma) plane, decoded in
-    half the time: the lines are measured in luma either way, and agree to a few hundredths of a
-    pixel; a grey frame that needs a full detection asks for its colour image."""
-    rng = np.random.default_rng(5)
-    bufs = []
-    for k in range(9):
-        c = Camera.look_at([42, -62, 13], [35 + 0.3 * k, -4, 0.5], fov_deg=14.0, roll_deg=0.8)
-        bufs.append(cv2.imencode(".jpg", finish_image(render_background(c), rng), [cv2.IMWRITE_JPEG_QUALITY, 90])[1])
-    colour = [cv2.imdecode(b, cv2.IMREAD_COLOR) for b in bufs]
-    cfg = LaneDetectorConfig(redetect_every=4)
-    ref = track_lanes(list(enumerate(colour)), cfg)
-    asked = []
-
-    def colour_of(i):
-        asked.append(i)
-        return colour[i]
-
-    frames = [(k, colour[k] if k % 4 == 0 else cv2.imdecode(b, cv2.IMREAD_GRAYSCALE)) for k, b in enumerate(bufs)]
-    fls = track_lanes(frames, cfg, colour=colour_of)
-    assert [f.status for f in fls] == [f.status for f in ref] and all(f.ok for f in fls)
-    assert asked == []  # every grey frame was followed
-    centre = np.array([640.0, 360.0, 1.0])
-    for f, r in zip(fls, ref):
-        assert len(f.lines) == len(r.lines)
-        d = [abs(a.line @ centre - b.line @ centre) for a, b in zip(f.lines, r.lines)]
-        assert max(d) < 0.05
-    # a grey first frame has no previous lines to follow: it is detected on its colour image
-    grey_first = [(k, cv2.imdecode(b, cv2.IMREAD_GRAYSCALE)) for k, b in enumerate(bufs[:2])]
-    assert track_lanes(grey_first, cfg, colour=colour_of)[0].ok and asked == [0]
-
-
 def test_paper_frames_give_three_lines_and_a_family(shared_data):
     frames = sorted((shared_data / "paper_frames").glob("*.jpeg"))
     assert len(frames) == 14
