@@ -404,17 +404,25 @@ def test_member_sensitivity_is_small_for_a_broadcast_camera_and_grows_at_the_fam
 
 
 def test_line_identities_are_settled_away_from_the_family_top(model):
-    """The lines' frame-to-frame identities are settled where the members scatter least, not at
-    the reference height (which can sit at the family's fold, where every member is
-    hypersensitive): there the camera must not jump sideways by a lane between frames."""
-    m, gt = model
+    """The lines' frame-to-frame identities (and the athlete's lane) are settled at the reference
+    height only where its members are well conditioned.  A reference height on the family's
+    fold (where a first pass can land on a steep view) used to settle them there: on this clip
+    the camera then sat one lane (1.24 m) off at the true height, and some frames a lane apart."""
+    import copy
+
+    m, gt = copy.deepcopy(model[0]), model[1]
+    h = gt.cameras[0].C[2]
+    true_y = np.array([c.C[1] for c in gt.cameras])
     top = float(np.nanmedian(np.nanmax(m.h[m.valid], axis=1)))
-    assert m._identity_h < 0.9 * top
-    assert m.member_sensitivity(m._identity_h) < 3.0
-    for h in (gt.cameras[0].C[2], m._identity_h):
+    for f in (0.99, 0.995):
+        m.h_ref = f * top
+        assert not m.member_sensitivity(m.h_ref) <= 2.0  # hypersensitive there
+        m._fix_offsets(final=True)
+        assert m.member_sensitivity(m._identity_h) <= 2.0
         cams = m.cameras_at(h)
         y = cams.C[cams.valid, 1]
         assert np.all(np.abs(np.diff(y)) < 0.5 * 1.22)
+        assert abs(np.median(y - true_y[cams.valid])) < 0.3
 
 
 def test_no_noise_copies_are_made_without_a_known_noise_level(model, monkeypatch):
