@@ -36,7 +36,7 @@ from .calibration.registration import camera_json, register_clip
 from .calibration.side import requested_side
 from .filtering import detection_status
 from .geometry import JOINT_NAMES
-from .inference import ModelPriors, angle_bands, gait_cycle_bands, gait_intervals
+from .inference import ModelPriors, angle_bands, gait_cycle_bands, gait_intervals, static_interval
 from .inference.heights import HEIGHT_SYSTEMATIC_SD
 from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationError
 from .inference.sampling import SamplerSettings
@@ -98,8 +98,9 @@ class RunResult:
     # (angle, side) -> (cycle_pct, median, lo, hi, n_cycles): gait_cycle.csv
     gait_cycle: dict = field(default_factory=dict)
     frame_status: list = field(default_factory=list)
-    # run.json's "lens" and "band_decomposition"
+    # run.json's "lens", "athlete" (stature, limb lengths: static_interval) and "band_decomposition"
     lens: dict = field(default_factory=dict)
+    athlete: dict = field(default_factory=dict)
     band_decomposition: dict = field(default_factory=dict)
     # the family branch (probreg.inference.evidence.BranchChoice)
     branch: object = None
@@ -199,9 +200,7 @@ def _lens_summary(options, lens, flat):
     """The lens of a run for ``camera.json`` (``k1``: median and 90 % interval) and ``run.json``:
     inferred (the posterior's ``k1`` draws), given (``--dist``) or assumed free of distortion."""
     if lens is not None and lens.given_k1 is None:
-        k1 = flat[:, -1]
-        lo, med, hi = np.percentile(k1, [5, 50, 95])
-        return {"source": "inferred", "median": float(med), "lo": float(lo), "hi": float(hi),
+        return {"source": "inferred", **static_interval(flat[:, -1], positive=False),
                 "prior_interval": list(options.lens_prior.interval(0.9)), **lens.to_dict()}
     k1 = float(options.dist[0]) if options.dist is not None else 0.0
     return {"source": "given" if options.dist is not None else "assumed", "median": k1, "lo": k1, "hi": k1,
@@ -422,8 +421,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     idata = posterior_inference_data(sampler, keypoints_px=clip.keypoints_px, frame_lanes=reg.frame_lanes,
                                      names=model.param_names)
     diag = _diagnostics(sampler, tau, idata, names=model.param_names)
-    h = np.exp(flat[:, 0])
-    height = {"median": float(np.median(h)), "lo": float(np.percentile(h, 5)), "hi": float(np.percentile(h, 95))}
+    height = static_interval(np.exp(flat[:, 0]))  # calibrated 90 % interval (and the model's own)
+    athlete = {f"{k}_m": static_interval(v) for k, v in {"stature": flat[:, 1], **model.lengths(flat)}.items()}
     lens_doc = _lens_summary(options, lens, flat)
     import warnings
 
@@ -443,9 +442,9 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     out_dir = Path(out_dir)
     n_angle = int(np.sum(np.any(np.isfinite(np.array([v[0] for v in summ.values()])), axis=0)))
     prior_h = options.priors.camera_height
-    # the largest at the median and the 90 % interval's ends: a posterior that reaches towards
-    # the family's fold is not pinned by the value at its median
-    sens = [model.member_sensitivity(height[k]) for k in ("lo", "median", "hi")]
+    # the largest at the median and the model's 90 % interval's ends: a posterior that reaches
+    # towards the family's fold is not pinned by the value at its median
+    sens = [model.member_sensitivity(height[k]) for k in ("model_lo", "median", "model_hi")]
     sensitivity = max((v for v in sens if not np.isnan(v)), default=float("nan"))
     status = [_frame_status(reg.frame_lanes[i], c, bool(model.inconsistent[i]), model.gap_distance[i])
               for i, c in enumerate(cam_list)]
@@ -461,7 +460,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                        gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
                        verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,
                        frame_status=status, lens=lens_doc, band_decomposition=decomposition,
-                       branch=branch)
+                       branch=branch, athlete=athlete)
     with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=inputs, log=log) as tmp:
         report = None
         if options.report:
@@ -489,7 +488,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                                      "input_notes": list(clip.notes), **extra,
                                      "diagnostics": diag, "timings_s": timings, "height_m": height,
                                      "height_member_sensitivity": sensitivity,
-                                     "height_allowance": options.height_allowance,
+                                     "height_allowance": options.height_allowance, "athlete": athlete,
                                      "lens": lens_doc, "band_decomposition": decomposition,
                                      "band_decomposition_method": DECOMPOSITION_METHOD,
                                      "frame_status": status, "keypoint_status": detection_status(model.raw, model.kp),

@@ -55,6 +55,11 @@ def peer_knee_errors(readme: Path):
 
 
 def _stature_interval(out_dir: Path):
+    """The stature's median and 90 % interval as the run reports it (``run.json``'s ``athlete``:
+    the calibrated interval); from ``posterior.nc``'s draws for a result without it."""
+    st = json.loads((out_dir / "run.json").read_text()).get("athlete", {}).get("stature_m")
+    if st is not None:
+        return float(st["median"]), float(st["lo"]), float(st["hi"])
     import xarray as xr
 
     with xr.open_dataset(out_dir / "posterior.nc", group="posterior") as post:

@@ -10,12 +10,14 @@ from .bands import (
     GAIT_BAND_SCALE,
     NONNEGATIVE_GAIT_SUFFIXES,
     STANCE_WINDOW,
+    STATIC_INTERVAL_SCALE,
     angle_bands,
     angle_curvature,
     GAIT_CYCLE_ANGLES,
     gait_cycle_bands,
     gait_intervals,
     stance_window,
+    static_interval,
 )
 from .model import (
     PARAM_NAMES,
@@ -32,4 +34,5 @@ __all__ = [
     "STANCE_WINDOW", "stance_window", "BAND_SCALE", "angle_curvature", "gait_intervals",
     "GAIT_BAND_SCALE", "NONNEGATIVE_GAIT_SUFFIXES", "ClipModel", "SamplerSettings", "MOVES", "PARAM_NAMES",
     "STILLNESS_SYS_SD", "BAND_CURVATURE_S2", "GAIT_CYCLE_ANGLES", "gait_cycle_bands",
+    "STATIC_INTERVAL_SCALE", "static_interval",
 ]

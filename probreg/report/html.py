@@ -11,6 +11,7 @@ import cv2
 import numpy as np
 
 from ..geometry import BONES, JOINT_INDEX, joint_angles
+from ..inference.bands import STATIC_INTERVAL_SCALE, static_interval
 from ..io.frames import read_frame
 
 __all__ = ["HtmlReport", "draw_skeleton", "clip_report", "run_report", "uncalibrated_report", "gait_cycle_figure",
@@ -153,7 +154,7 @@ def clip_report(clip_dir, out_html):
     return rep.save(out_html)
 
 
-def scale_note(stature_prior, stature_draws):
+def scale_note(stature_prior, stature_draws, interval=None):
     """What sets the metric scale of a run, in words for the report.
 
     Lanes fix the camera only up to its one degree of freedom, and a 2D skeleton has
@@ -161,7 +162,9 @@ def scale_note(stature_prior, stature_draws):
     camera (at a wrong scale they seem to slide; ``posterior.STILLNESS_SYS_SD``), turn
     pixels into metres.  When the clip narrows the stature little beyond its prior, the
     camera height, the limb lengths, step length and speed carry the prior's uncertainty
-    (joint angles do not depend on the scale).
+    (joint angles do not depend on the scale).  ``interval`` ``(lo, hi)`` is the interval to
+    quote (the run's calibrated one, :func:`probreg.inference.static_interval`); the draws' own
+    90 % interval decides whether the clip added to the prior.
 
     >>> from probreg.inference.priors import NormalPrior
     >>> rng = np.random.default_rng(0)
@@ -177,8 +180,9 @@ def scale_note(stature_prior, stature_draws):
         return "Metric scale: no stature draws to judge it by."
     lo, hi = np.percentile(v, [5, 95])
     med = float(np.median(v))
-    half = 50.0 * (hi - lo) / med
-    text = (f"Metric scale: athlete's stature {med:.2f} m, 90 % interval [{lo:.2f}, {hi:.2f}] "
+    q_lo, q_hi = (lo, hi) if interval is None else interval
+    half = 50.0 * (q_hi - q_lo) / med
+    text = (f"Metric scale: athlete's stature {med:.2f} m, 90 % interval [{q_lo:.2f}, {q_hi:.2f}] "
             f"(prior [{lo_p:.2f}, {hi_p:.2f}]).")
     if (hi - lo) > 0.7 * (hi_p - lo_p):
         text += (f" The clip adds little to the prior here, so the metric scale follows the stature prior: "
@@ -210,12 +214,18 @@ def run_report(out_html, clip, result, joints_median, cameras):
     post = result.posterior.posterior
     rep.heading("Calibration and athlete (posterior median, 90 % interval)")
     rows = [["camera height (m)", h["median"], h["lo"], h["hi"]]]
+    athlete = getattr(result, "athlete", None) or {}
     for var in ["stature", "thigh_m", "shank_m", "upper_arm_m", "forearm_m", "trunk_m"]:
-        v = post[var].values.ravel()
-        rows.append([var.replace("_m", " (m)"), float(np.median(v)), float(np.percentile(v, 5)),
-                     float(np.percentile(v, 95))])
+        a = athlete.get(var if var.endswith("_m") else f"{var}_m") or static_interval(post[var].values)
+        rows.append([var.replace("_m", " (m)"), a["median"], a["lo"], a["hi"]])
     rep.table(["quantity", "median", "5 %", "95 %"], rows, fmt="{:.3f}")
-    rep.paragraph(scale_note(result.model.priors.stature, post["stature"].values.ravel()), cls="note")
+    rep.paragraph("The intervals are the posterior's 90 % intervals widened about the median by the calibrated "
+                  f"factor {h.get('interval_scale', STATIC_INTERVAL_SCALE):g} (the model's posterior is narrower "
+                  "than its errors on clips with known truth; probreg.inference.STATIC_INTERVAL_SCALE); "
+                  "posterior.nc holds the draws themselves.", cls="note")
+    st = athlete.get("stature_m")
+    rep.paragraph(scale_note(result.model.priors.stature, post["stature"].values.ravel(),
+                             None if st is None else (st["lo"], st["hi"])), cls="note")
     rep.figure(prior_posterior_figure(result.model.priors, post), "Prior (grey) and posterior (blue) of the "
                "athlete's stature and the camera height: where the posterior is as wide as the prior, the clip "
                "did not measure the quantity")

@@ -58,6 +58,21 @@ def test_broadcast_camera_stays_on_the_narrow_branch(small_clip, tmp_path):
     assert doc["chosen"] == "narrow" and doc["log_evidence"]["wide"] < doc["log_evidence"]["narrow"]
     # far below the family's top: a 1 % height change moves the focal length by about 1 %
     assert 0.5 < run["height_member_sensitivity"] < 3.0
+    # the reported intervals are the posterior's, widened about the median by the calibrated
+    # factor (in log for positive quantities); camera.json carries the same interval as run.json
+    from probreg.inference import STATIC_INTERVAL_SCALE
+
+    h, cam = run["height_m"], json.loads((tmp_path / "out" / "camera.json").read_text())["height_m"]
+    assert (cam["lo"], cam["hi"]) == (h["lo"], h["hi"])
+    draws = res.posterior.posterior["height_m"].values.ravel()
+    assert h["model_lo"] == pytest.approx(np.percentile(draws, 5))
+    assert h["model_hi"] == pytest.approx(np.percentile(draws, 95))
+    for q in ("lo", "hi"):
+        widened = STATIC_INTERVAL_SCALE * np.log(h[f"model_{q}"] / h["median"])
+        assert np.log(h[q] / h["median"]) == pytest.approx(widened)
+    st = run["athlete"]["stature_m"]
+    assert st["lo"] < st["model_lo"] < st["median"] < st["model_hi"] < st["hi"]
+    assert set(run["athlete"]) >= {"stature_m", "thigh_m", "shank_m", "upper_arm_m", "forearm_m", "trunk_m"}
 
 
 def test_unknown_branch_is_a_clear_error(small_clip, tmp_path):
