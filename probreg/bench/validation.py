@@ -11,7 +11,7 @@ ground truth:
   peer's (the validation README's Butterworth column), and the fraction of frames whose true
   knee angle lies inside the 90 % band;
 * camera height error (%) and whether its 90 % interval holds the truth; the same for the
-  athlete's stature (from ``posterior.nc``);
+  athlete's stature (the calibrated intervals of ``camera.json`` and ``run.json``);
 * camera side (the camera centre on the same side of the athlete's lane as the true one) and
   camera position error after one shift along ``x`` per clip (the along-track position is not
   observable; the shift is the median difference of the pelvis ``x``), in % of the horizontal
