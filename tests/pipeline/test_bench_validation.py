@@ -1,0 +1,29 @@
+"""``bench validation``'s lifting floor: the knee error of ``probreg lift`` given the clip's true
+cameras and limb lengths."""
+
+import shutil
+
+import numpy as np
+
+from probreg.bench.validation import _true_camera_knee
+from probreg.io.clip import write_keypoints_json
+
+
+def test_true_camera_floor_is_zero_for_exact_keypoints_and_not_for_noisy(small_clip, tmp_path):
+    noisy = _true_camera_knee(small_clip, tmp_path / "noisy")
+    exact = tmp_path / "exact"
+    shutil.copytree(small_clip, exact)
+    truth = np.load(exact / "groundtruth" / "joints2d.npy")
+    if truth.shape[-1] == 2:
+        truth = np.concatenate([truth, np.ones(truth.shape[:-1] + (1,))], axis=-1)
+    write_keypoints_json(exact / "keypoints2d.json", truth)
+    floor = _true_camera_knee(exact, tmp_path / "exact_work")
+    # the lifting with the true cameras and exact 2D is exact (ray casting, no smoothing needed)
+    assert floor < 0.5
+    # the clip's simulated detector noise costs degrees even with the true cameras
+    assert 1.0 < noisy < 8.0
+    # a clip without a usable lifting gives NaN, not an exception
+    broken = tmp_path / "broken"
+    shutil.copytree(small_clip, broken)
+    (broken / "keypoints2d.json").write_text("{")
+    assert np.isnan(_true_camera_knee(broken, tmp_path / "broken_work"))
