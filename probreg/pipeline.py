@@ -36,7 +36,8 @@ from .calibration.registration import camera_json, register_clip
 from .calibration.side import requested_side
 from .filtering import detection_status
 from .geometry import JOINT_NAMES
-from .inference import ModelPriors, angle_bands, gait_cycle_bands, gait_intervals, static_interval
+from .inference import (STATIC_INTERVAL_SCALE, ModelPriors, angle_bands, gait_cycle_bands, gait_intervals,
+                        static_interval)
 from .inference.heights import HEIGHT_SYSTEMATIC_SD
 from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationError
 from .inference.sampling import SamplerSettings
@@ -144,9 +145,9 @@ def posterior_inference_data(sampler, burn=0, keypoints_px=None, frame_lanes=Non
 
     chain = sampler.get_chain()[burn:]  # (draw, chain, D)
     idata = az.from_dict(posterior={n: chain[:, :, i].T for i, n in enumerate(names)},
-                         sample_stats={"lp": sampler.get_log_prob()[burn:].T},
-                         attrs={"inference_library": "emcee"})
+                         sample_stats={"lp": sampler.get_log_prob()[burn:].T})
     post = idata.posterior
+    post.attrs.update(inference_library="emcee", reported_interval_scale=STATIC_INTERVAL_SCALE)
     post["height_m"] = np.exp(post["log_height"])
     from .inference import SEGMENT_PROPORTIONS
 

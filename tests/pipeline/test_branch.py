@@ -65,6 +65,7 @@ def test_broadcast_camera_stays_on_the_narrow_branch(small_clip, tmp_path):
     h, cam = run["height_m"], json.loads((tmp_path / "out" / "camera.json").read_text())["height_m"]
     assert (cam["lo"], cam["hi"]) == (h["lo"], h["hi"])
     draws = res.posterior.posterior["height_m"].values.ravel()
+    assert res.posterior.posterior.attrs["reported_interval_scale"] == STATIC_INTERVAL_SCALE
     assert h["model_lo"] == pytest.approx(np.percentile(draws, 5))
     assert h["model_hi"] == pytest.approx(np.percentile(draws, 95))
     for q in ("lo", "hi"):
