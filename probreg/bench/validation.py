@@ -176,8 +176,8 @@ def _score_set(clips, peer, tmp):
                                  "verdict": "uncalibrated", "verdict_reasons": run.get("verdict_reasons", [])}
             continue
         s = score_validation(clip, out)
-        s.update(exit=code, time_s=dt, failed=False, knee_true_camera_deg=_true_camera_knee(clip, Path(tmp) / (
-            clip.name + ".true_camera")))
+        s.update(exit=code, time_s=dt, failed=False,
+                 knee_true_camera_deg=_true_camera_knee(clip, Path(tmp) / f"{clip.name}.true_camera"))
         scores[clip.name] = s
         p = peer.get(clip.name, float("nan"))
         reasons = "; ".join(s["verdict_reasons"])
@@ -300,7 +300,8 @@ def _run_sets(rep, sets, only, keep=None):
         if not clips:
             continue
         if keep is not None:
-            there = [c.name for c in clips if (Path(keep) / c.name).exists()]
+            # each clip's result folder and its true-camera lifting's work folder
+            there = [c.name for c in clips if any((Path(keep) / n).exists() for n in (c.name, f"{c.name}.true_camera"))]
             if there:
                 raise ValueError(f"{keep}: result folders already there ({', '.join(there[:3])}"
                                  f"{', ...' if len(there) > 3 else ''}); give an empty or new folder")

@@ -416,3 +416,12 @@ def test_bench_validation_refuses_to_score_old_result_folders(tmp_path):
     with pytest.raises(ValueError, match="already there"):
         _run_sets(rep, [("validation clips (test)", {}, [clip])], None, keep=keep)
     assert (keep / "v99_old" / "angles.csv").read_text() == "old"
+    # nor the work folder of an old true-camera lifting
+    old_lift = keep / "v98_old.true_camera" / "lift"
+    old_lift.mkdir(parents=True)
+    (old_lift / "angles.csv").write_text("old")
+    other = tmp_path / "clips" / "v98_old"
+    other.mkdir()
+    with pytest.raises(ValueError, match="already there"):
+        _run_sets(rep, [("validation clips (test)", {}, [other])], None, keep=keep)
+    assert (old_lift / "angles.csv").read_text() == "old"
