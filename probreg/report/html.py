@@ -11,7 +11,6 @@ import cv2
 import numpy as np
 
 from ..geometry import BONES, JOINT_INDEX, joint_angles
-from ..inference.bands import STATIC_INTERVAL_SCALE, static_interval
 from ..io.frames import read_frame
 
 __all__ = ["HtmlReport", "draw_skeleton", "clip_report", "run_report", "uncalibrated_report", "gait_cycle_figure",
@@ -214,18 +213,17 @@ def run_report(out_html, clip, result, joints_median, cameras):
     post = result.posterior.posterior
     rep.heading("Calibration and athlete (posterior median, 90 % interval)")
     rows = [["camera height (m)", h["median"], h["lo"], h["hi"]]]
-    athlete = getattr(result, "athlete", None) or {}
-    for var in ["stature", "thigh_m", "shank_m", "upper_arm_m", "forearm_m", "trunk_m"]:
-        a = athlete.get(var if var.endswith("_m") else f"{var}_m") or static_interval(post[var].values)
+    for var in ["stature_m", "thigh_m", "shank_m", "upper_arm_m", "forearm_m", "trunk_m"]:
+        a = result.athlete[var]
         rows.append([var.replace("_m", " (m)"), a["median"], a["lo"], a["hi"]])
     rep.table(["quantity", "median", "5 %", "95 %"], rows, fmt="{:.3f}")
     rep.paragraph("The intervals are the posterior's 90 % intervals widened about the median by the calibrated "
-                  f"factor {h.get('interval_scale', STATIC_INTERVAL_SCALE):g} (the model's posterior is narrower "
+                  f"factor {h['interval_scale']:g} (the model's posterior is narrower "
                   "than its errors on clips with known truth; probreg.inference.STATIC_INTERVAL_SCALE); "
                   "posterior.nc holds the draws themselves.", cls="note")
-    st = athlete.get("stature_m")
-    rep.paragraph(scale_note(result.model.priors.stature, post["stature"].values.ravel(),
-                             None if st is None else (st["lo"], st["hi"])), cls="note")
+    st = result.athlete["stature_m"]
+    rep.paragraph(scale_note(result.model.priors.stature, post["stature"].values.ravel(), (st["lo"], st["hi"])),
+                  cls="note")
     rep.figure(prior_posterior_figure(result.model.priors, post), "Prior (grey) and posterior (blue) of the "
                "athlete's stature and the camera height: where the posterior is as wide as the prior, the clip "
                "did not measure the quantity")
