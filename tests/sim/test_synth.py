@@ -179,3 +179,18 @@ def test_failed_write_leaves_no_complete_looking_clip(tmp_path, monkeypatch):
         write_clip(clip, tmp_path / "clip", images=True)
     assert not (tmp_path / "clip").exists()
     assert list(tmp_path.iterdir()) == []
+
+
+def test_held_out_seeds_are_kept_apart_from_the_development_sets():
+    """The held-out sets (issue 25's randomised set, the held-out lens suite) share no seed with
+    a suite that was developed on, and the lens suites draw the set-ups the lens targets are about."""
+    from probreg.sim.heldout import HELDOUT_SEEDS
+
+    developed = {seed for name, clips in SUITES.items() if name != "lens_heldout" for _, _, seed in clips}
+    held_lens = [seed for _, _, seed in SUITES["lens_heldout"]]
+    assert len(set(held_lens)) == len(held_lens) == 16
+    assert not developed & set(held_lens)
+    assert not (developed | set(held_lens)) & set(HELDOUT_SEEDS)
+    for _, preset, seed in SUITES["lens_heldout"][:4]:
+        k1 = config_from_preset(preset, seed).camera.dist[0]
+        assert 0.1 <= abs(k1) <= 0.25
