@@ -18,7 +18,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CONSISTENT_SEGMENTS", "HEIGHT_SYSTEMATIC_SD", "LIMB_SPREAD_FLOOR", "height_grid", "identity_height", "limb_consistency",
+__all__ = ["HEIGHT_SYSTEMATIC_SD", "LIMB_SPREAD_FLOOR", "height_grid", "identity_height", "limb_consistency",
            "smear_log_likelihood"]
 
 #: relative distances below the frames' typical lowest top (see :func:`height_grid`) at which
@@ -132,15 +132,9 @@ def smear_log_likelihood(grid, ll, sd=HEIGHT_SYSTEMATIC_SD, step=None):
 #: rewarding (out-of-plane motion alone spreads a limb's sagittal length by a few per cent)
 LIMB_SPREAD_FLOOR = 0.01
 
-#: the segments whose sagittal length the consistency term asks to stay constant: those that move
-#: in the sagittal plane while running (thigh and shank).  The arms swing across the body (the
-#: forearm most), so their lengths cast onto the plane change with the athlete's own style at any
-#: camera height, and a height that happens to shrink that spread is not the camera's.
-CONSISTENT_SEGMENTS = ("thigh", "shank")
-
 
 def limb_consistency(spread, count, frames_per_sample=10.0, floor=LIMB_SPREAD_FLOOR, measured=None,
-                     min_coverage=0.8, segments=CONSISTENT_SEGMENTS):
+                     min_coverage=0.8):
     """Log-likelihood on the height grid that every segment keeps one length through the clip.
 
     Under the right camera a limb cast onto the athlete's sagittal plane has about the same
@@ -162,8 +156,7 @@ def limb_consistency(spread, count, frames_per_sample=10.0, floor=LIMB_SPREAD_FL
     pulled the height 6 % high).  Spreads below ``floor`` count as ``floor``.
 
     ``spread``: dict segment -> (G,) array; ``count``: dict segment -> number of lengths the
-    keypoints give.  Only ``segments`` count (:data:`CONSISTENT_SEGMENTS`: the legs; the arms'
-    out-of-plane swing spreads their sagittal lengths at every height).
+    keypoints give.
 
     >>> sp = {"thigh": np.array([0.08, 0.04, 0.05, np.nan])}
     >>> n = {"thigh": 200}
@@ -172,14 +165,9 @@ def limb_consistency(spread, count, frames_per_sample=10.0, floor=LIMB_SPREAD_FL
     >>> few = {"thigh": np.array([200, 200, 60, 0])}  # a third height seen in 30 % of the frames
     >>> np.round(limb_consistency(sp, n, measured=few) - limb_consistency(sp, n)[1], 2)
     array([-13.86,   0.  , -13.86, -13.86])
-    >>> arms = {"forearm": np.array([0.02, 0.30, 0.30, 0.30])}  # an arm's spread: not the camera's
-    >>> np.array_equal(limb_consistency({**sp, **arms}, {**n, "forearm": 200}), limb_consistency(sp, n))
-    True
     """
     total = None
     for s, sp in spread.items():
-        if s not in segments:
-            continue
         sp = np.asarray(sp, float)
         ok = np.isfinite(sp)
         if measured is not None:
