@@ -103,14 +103,11 @@ def _clips(args, tmp):
     """(set, name, clip folder) of every clip, generated where needed."""
     out = []
     root = Path(args.suite_dir) if getattr(args, "suite_dir", None) else Path(tmp)
-    lens_root = root / "lens"
-    if not all((lens_root / n / "clip.json").exists() for n, _, _ in SUITES["lens"]):
-        write_suite("lens", lens_root, n_frames=100, overwrite=True)
-    out += [("lens", n, lens_root / n) for n, _, _ in SUITES["lens"]]
-    held_root = root / "lens_heldout"
-    if not all((held_root / n / "clip.json").exists() for n, _, _ in SUITES["lens_heldout"]):
-        write_suite("lens_heldout", held_root, n_frames=100, overwrite=True)
-    out += [("lens_heldout", n, held_root / n) for n, _, _ in SUITES["lens_heldout"]]
+    for suite in ("lens", "lens_heldout"):
+        suite_root = root / suite
+        if not all((suite_root / n / "clip.json").exists() for n, _, _ in SUITES[suite]):
+            write_suite(suite, suite_root, n_frames=100, overwrite=True)
+        out += [(suite, n, suite_root / n) for n, _, _ in SUITES[suite]]
     for name, preset, seed in NARROW:
         d = root / "narrow" / name
         if not (d / "clip.json").exists():
