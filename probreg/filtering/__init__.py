@@ -5,6 +5,7 @@ and cross-stride smoothing that uses the repetition of running strides
 
 from .basic import butterworth, fill_gaps, hampel, keypoint_noise_px, noise_model
 from .clean import clean_keypoints, detection_status
+from .pair import periodic_smooth_pair
 from .periodic import (
     periodic_smooth,
     periodic_smooth_series,
@@ -15,6 +16,6 @@ from .periodic import (
 
 __all__ = [
     "hampel", "fill_gaps", "butterworth", "clean_keypoints", "detection_status", "keypoint_noise_px", "noise_model",
-    "periodic_smooth", "periodic_smooth_series", "score_noise_scale", "stride_lags",
+    "periodic_smooth", "periodic_smooth_pair", "periodic_smooth_series", "score_noise_scale", "stride_lags",
     "stride_period_frames",
 ]

@@ -106,8 +106,9 @@ class SeriesSystem:
         return x, float(self.qd @ d + 2.0 * (self.qo @ o))
 
 
-def band_inverse_diagonals(L, block=None):
-    """Diagonal and first sub-diagonal of ``A^-1`` from the banded Cholesky factor ``L`` of ``A``
+def band_inverse_diagonals(L, block=None, offset=1):
+    """Diagonal and one sub-diagonal (the first, or ``offset``-th) of ``A^-1`` from the banded
+    Cholesky factor ``L`` of ``A``
     (lower band storage ``L[i - j, j]``, as :func:`scipy.linalg.cholesky_banded` gives it).
 
     Selected inversion by blocks (Takahashi's recursion): a factor of bandwidth ``u`` is block
@@ -116,7 +117,8 @@ def band_inverse_diagonals(L, block=None):
     ``S_{i+1,i} = -S_{i+1,i+1} X_i``, ``S_ii = L_ii^-T L_ii^-1 + X_i' S_{i+1,i+1} X_i``,
     at ``O(n b^2)`` instead of the ``O(n^2 u)`` of solving for all of ``L^-1``.
 
-    Returns ``(diag, sub)``: ``diag[i] = S[i, i]`` (n,), ``sub[i] = S[i + 1, i]`` (n - 1,).
+    Returns ``(diag, sub)``: ``diag[i] = S[i, i]`` (n,), ``sub[i] = S[i + offset, i]``
+    (n - offset,).
     Raises ``numpy.linalg.LinAlgError`` for a singular factor.
 
     >>> from scipy.linalg import cholesky_banded
@@ -128,12 +130,16 @@ def band_inverse_diagonals(L, block=None):
     >>> S = np.linalg.inv(A)
     >>> bool(np.allclose(d, np.diagonal(S)) and np.allclose(s, np.diagonal(S, -1)))
     True
+    >>> d, s2 = band_inverse_diagonals(cholesky_banded(ab, lower=True), block=7, offset=2)
+    >>> bool(np.allclose(s2, np.diagonal(S, -2)))
+    True
     """
     from scipy.linalg.lapack import dtrtri
 
     L = np.asarray(L, float)
     u1, n = L.shape
-    b = max(u1 - 1, 16) if block is None else max(int(block), u1 - 1, 1)
+    o = int(offset)
+    b = max(u1 - 1, 16, o) if block is None else max(int(block), u1 - 1, 1, o)
     # dense blocks straight from the band storage (memory n b, not n^2): entry (s + r, s + c) of
     # the factor is L[r - c, s + c] (+ b rows for the block below the diagonal one)
     off = np.arange(2 * b)[:, None] - np.arange(b)[None, :]
@@ -145,7 +151,7 @@ def band_inverse_diagonals(L, block=None):
         rows, w = min(2 * b, n - s), e - s
         return L[off[:rows, :w], s + col[:rows, :w]] * inside[:rows, :w]
 
-    diag, sub = np.empty(n), np.zeros(max(n - 1, 0))
+    diag, sub = np.empty(n), np.zeros(max(n - o, 0))
     S_next = None
     for s in range(((n - 1) // b) * b, -1, -b):
         e = min(s + b, n)
@@ -158,9 +164,11 @@ def band_inverse_diagonals(L, block=None):
             X = D[e - s:] @ Linv
             SX = S_next @ X
             S += X.T @ SX
-            sub[e - 1] = -SX[0, -1]  # S[e, e - 1]
+            for i in range(min(o, n - e)):  # S[e + i, e - o + i], across the block boundary
+                if e - o + i >= s:
+                    sub[e - o + i] = -SX[i, e - o + i - s]
         diag[s:e] = np.diagonal(S)
-        sub[s:e - 1] = np.diagonal(S, -1)
+        sub[s:max(e - o, s)] = np.diagonal(S, -o)
         S_next = S
     return diag, sub
 

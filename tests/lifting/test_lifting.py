@@ -176,8 +176,9 @@ def long_run():
     return synthesize(config_from_preset("run", 21, n_frames=250), seed=21, preset="run")
 
 
-def test_cross_stride_angle_smoothing_moves_joints_to_the_smoothed_angles(long_run):
-    from probreg.filtering import periodic_smooth_series, stride_lags
+@pytest.mark.parametrize("pair", [True, False])
+def test_cross_stride_angle_smoothing_moves_joints_to_the_smoothed_angles(long_run, pair):
+    from probreg.filtering import periodic_smooth_pair, periodic_smooth_series, stride_lags
     from probreg.lifting import smooth_angles_across_strides
 
     c = long_run
@@ -187,10 +188,15 @@ def test_cross_stride_angle_smoothing_moves_joints_to_the_smoothed_angles(long_r
     j, fwd = res.joints_track_m, res.track.forward
     lag = stride_lags(c.keypoints_px, c.config.fps)
     assert lag is not None
-    out, info = smooth_angles_across_strides(j, fwd, lag, c.config.fps)
+    out, info = smooth_angles_across_strides(j, fwd, lag, c.config.fps, pair_min_sd=2.0 if pair else None)
     before, after = joint_angles(j, forward=fwd), joint_angles(out, forward=fwd)
     for name in ("knee_l", "knee_r", "hip_r", "elbow_l"):
-        want = periodic_smooth_series(before[name], lag, c.config.fps)[0]
+        if pair:  # both sides of the angle together
+            base, side = name.split("_")
+            fits = periodic_smooth_pair(before[f"{base}_l"], before[f"{base}_r"], lag, c.config.fps)[0]
+            want = fits[0 if side == "l" else 1]
+        else:
+            want = periodic_smooth_series(before[name], lag, c.config.fps)[0]
         if not name.startswith("hip"):  # flexion is unsigned: a straight limb at most
             want = np.clip(want, 0, None)
         ok = np.isfinite(before[name])
