@@ -7,7 +7,6 @@ import pytest
 from probreg.filtering import periodic_smooth_pair, periodic_smooth_series
 from probreg.filtering.banded import band_inverse_diagonals
 from probreg.filtering.pair import PairSystem
-from tests.filtering.test_banded import _dense_reference
 
 
 def _interp_rows(F, t, pos, col_offset, n):
@@ -39,8 +38,7 @@ def test_pair_system_matches_dense_definition(rho, missing):
     b = np.zeros(2 * F)
     Qms = []
     for s, S in enumerate(ps.series):
-        # the single-series reference gives A_s = Qm + sn2 R'WR + P2 via x = A_s^-1 Qm y0: rebuild
-        # its parts from unit vectors (columns of A_s^-1 Qm are not enough), so write them out
+        # the series' own parts written out: AR(1) data precision, second differences, stride ties
         Qm = np.diag(S.qd) + np.diag(S.qo, 1) + np.diag(S.qo, -1)
         Qms.append(Qm)
         D2 = np.zeros((F - 2, F))
@@ -100,7 +98,7 @@ def _runner(asym_deg, seed, F=240, T=33.0, noise=6.0):
 
 
 def test_symmetric_runner_gains_from_the_other_side():
-    t, _, left, right, yl, yr, lag = _runner(0.0, 3)
+    _, _, left, right, yl, yr, lag = _runner(0.0, 3)
     (xl, xr), info = periodic_smooth_pair(yl, yr, lag, 50.0)
     alone = [periodic_smooth_series(y, lag, 50.0)[0] for y in (yl, yr)]
     for x, a, truth in ((xl, alone[0], left), (xr, alone[1], right)):
@@ -112,8 +110,8 @@ def test_symmetric_runner_gains_from_the_other_side():
 def test_asymmetric_runner_keeps_its_asymmetry():
     # 15 deg of systematic left/right difference: fitted as such, and the fit must not pull
     # each side towards the other
-    t, sym_right, left, right, yl, yr, lag = _runner(15.0, 4)
-    (xl, xr), info = periodic_smooth_pair(yl, yr, lag, 50.0)
+    _, sym_right, _, right, yl, yr, lag = _runner(15.0, 4)
+    (_, xr), info = periodic_smooth_pair(yl, yr, lag, 50.0)
     assert info["asym_systematic_sd"] == pytest.approx(15.0 / np.sqrt(2), rel=0.2)
     alone = periodic_smooth_series(yr, lag, 50.0)[0]
     assert np.sqrt(np.mean((xr - right) ** 2)) < 1.1 * np.sqrt(np.mean((alone - right) ** 2))
@@ -122,11 +120,11 @@ def test_asymmetric_runner_keeps_its_asymmetry():
 
 
 def test_pair_falls_back_to_each_side_alone():
-    t, _, left, right, yl, yr, lag = _runner(0.0, 5, F=120)
+    *_, yl, yr, lag = _runner(0.0, 5, F=120)
     few = yr.copy()
     few[5:] = np.nan  # fewer than 10 frames on the right
-    (xl, xr), info = periodic_smooth_pair(yl, few, lag, 50.0)
+    (xl, _), info = periodic_smooth_pair(yl, few, lag, 50.0)
     assert np.isnan(info["asym_sd"])
     assert np.allclose(xl, periodic_smooth_series(yl, lag, 50.0)[0])
-    (xl, xr), info = periodic_smooth_pair(yl, yr, None, 50.0)  # no strides: nothing to tie
+    (xl, _), info = periodic_smooth_pair(yl, yr, None, 50.0)  # no strides: nothing to tie
     assert np.isnan(info["asym_sd"]) and np.array_equal(xl, yl)
