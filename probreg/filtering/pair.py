@@ -5,9 +5,10 @@ pattern half a stride apart.
 later.  Running is also nearly symmetric: the left knee at ``t`` bends as the right knee does
 half a stride later, up to the athlete's left/right asymmetry.  Smoothing the two sides of a
 joint as one system with that second tie doubles the repetitions the noise is averaged over.
-The tie is loose where the athlete is asymmetric: its variance holds an asymmetry term
-estimated from the clip (the half-stride differences of the data minus the noise's share),
-floored at ``min_asym`` because a short noisy clip underestimates it.  The floor comes from
+The tie is to the athlete's own systematic left/right difference (harmonics of the stride
+phase fitted to the clip, shrunk towards zero), so a real asymmetry is kept; what varies beyond
+it enters the tie's variance, estimated from the clip (the half-stride differences of the data
+minus the noise's share) and floored at ``min_asym`` because a short noisy clip underestimates it.  The floor comes from
 real running: in the CMU motion capture of ``shared/data/mocap`` (7 runs, 4 subjects) the
 left/right half-stride knee differences have an rms of 3.0-7.8 deg (timing jitter included),
 an asymmetry sd of ``rms / sqrt(2)`` = 2.1-5.5 deg; 2 deg is the most symmetric runner's.
@@ -73,7 +74,7 @@ class PairSystem:
         self.u = max(width)
 
     def asymmetry_design(self, harmonics=ASYM_HARMONICS):
-        """Regressors (rows, 2 harmonics + 1) of the systematic asymmetry at the pair rows."""
+        """Regressors (rows, 2 * harmonics + 1) of the systematic asymmetry at the pair rows."""
         cols = [np.ones(len(self.pair_phase))]
         for m in range(1, harmonics + 1):
             cols += [np.cos(m * self.pair_phase), np.sin(m * self.pair_phase)]
