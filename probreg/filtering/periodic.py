@@ -21,6 +21,16 @@ __all__ = ["periodic_smooth", "periodic_smooth_series", "score_noise_scale", "st
 
 
 # --------------------------------------------------------------------------- cross-stride smoothing
+#: Fewest repeating strides a clip must show for the cross-stride ties (keypoints and angles).
+#: 1.5 is what :func:`stride_period_frames` can measure at all (the lag is searched up to a
+#: third of the clip below its length); from 1.5 strides on, the frames of the first half
+#: stride already have a partner one stride later, and the left/right tie half a stride later
+#: covers nearly every frame.  Chosen on the tuning clips cut to 55 and 65 frames (1.5-1.9
+#: strides; two windows each, exact cameras): knee-angle error 5.98 -> 4.88 deg (55 frames)
+#: and 5.64 -> 3.84 deg (65 frames) against the former 2 strides; one window of 60 got worse
+#: (+0.4 deg).  Clips of 2 strides and more are unchanged.
+MIN_STRIDES = 1.5
+
 #: Trunk joints (H36M order) whose common motion is the reference point of the relative coordinates.
 _TRUNK = (0, 1, 4, 7, 8, 11, 14)
 
@@ -109,7 +119,7 @@ def _relative_tracks(kp, fps, noise):
     return rel, ref, scale, rel_t
 
 
-def stride_lags(keypoints_px, fps, min_strides=2.0):
+def stride_lags(keypoints_px, fps, min_strides=MIN_STRIDES):
     """Per-frame lag (frames, fractional) to the same phase one stride later, from the
     whole-body 2D pattern; None when the clip shows fewer than ``min_strides`` repeating
     strides.  Frames without a partner one stride later are NaN.
@@ -471,7 +481,7 @@ def score_noise_scale(keypoints_px, fitted_px, noise_px, floor=0.1, outlier_cap=
 
 
 def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cutoff_hz=7.0,
-                    lag_sd_frames=0.35, min_strides=2.0, robust_iters=3, outlier_k=10.0, fill_max_gap=10,
+                    lag_sd_frames=0.35, min_strides=MIN_STRIDES, robust_iters=3, outlier_k=10.0, fill_max_gap=10,
                     rel_sd=None, score_weights=True, ankle_cutoff_hz=10.0):
     """Cross-stride smoothing of keypoint tracks: running repeats itself, noise does not.
 

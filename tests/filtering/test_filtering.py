@@ -161,6 +161,21 @@ def test_stride_lags_follow_the_stride(runner_views):
     assert stride_lags(walk, 50.0) is None
 
 
+def test_short_clip_of_under_two_strides_is_still_smoothed(runner_views):
+    """A clip of 1.7 strides (the validation set's 60-70 frame clips) has a stride lag and is
+    smoothed across strides; one of 1.2 strides (too short to measure a period) is not."""
+    m, truth, noisy = runner_views
+    T = 50.0 * 2 / m.gait.step_freq_hz
+    short = int(1.7 * T)
+    lag = stride_lags(noisy[:short], 50.0)
+    assert lag is not None and abs(np.nanmedian(lag) - T) < 1.5
+    assert np.isfinite(lag).sum() >= short - T - 2  # frames with a partner one stride later
+    sm = periodic_smooth(noisy[:short], 50.0)
+    err = lambda kp: np.sqrt(np.nanmean(np.sum((kp[..., :2] - truth[:short, :, :2]) ** 2, -1)))  # noqa: E731
+    assert sm is not None and err(sm) < 0.8 * err(noisy[:short])
+    assert stride_lags(noisy[:int(1.2 * T)], 50.0) is None
+
+
 def test_confidence_weighting_learns_from_the_clip(runner_views):
     """Detections whose confidence is low are worse: a second pass weighted by what the
     clip's own residuals say about the scores beats equal weights; constant scores change
