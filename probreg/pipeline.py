@@ -117,15 +117,14 @@ def _arviz():
 
 
 def _warm_imports():
-    """Import the modules only the end of a run needs (xarray and h5netcdf for ``posterior.nc``,
-    matplotlib for the report, about 1 s) in a thread while the lanes are found; join it
-    before any process is forked (a fork while another thread holds an import lock could hang)."""
+    """Import what the rest of a run needs (scipy.signal, ArviZ, h5netcdf, matplotlib: ~2.5 s) in
+    a thread while the lanes are found; join it before any fork (an import lock could hang it)."""
     import threading
 
     def work():
         import importlib
 
-        for name in ("xarray", "h5netcdf", "matplotlib.figure", "matplotlib.backends.backend_agg"):
+        for name in ("scipy.signal", "h5netcdf", "arviz", "matplotlib.figure", "matplotlib.backends.backend_agg"):
             try:
                 importlib.import_module(name)
             except Exception:  # noqa: BLE001 -- only a head start: the real import reports it

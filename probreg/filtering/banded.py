@@ -19,12 +19,15 @@ __all__ = ["SeriesSystem", "band_inverse_diagonals", "lower_band"]
 def _band_add(ab, cols, vals, w):
     """``ab += sum_rows w_r v_r v_r'`` (each row ``v_r`` given by its columns ``cols[r]`` and
     values ``vals[r]``) in lower band storage ``ab[i - j, j] = A[i, j]``."""
-    p = cols.shape[1]
-    for a in range(p):
-        for b in range(p):
-            r, c = cols[:, a], cols[:, b]
-            keep = r >= c
-            np.add.at(ab, (r[keep] - c[keep], c[keep]), (w * vals[:, a] * vals[:, b])[keep])
+    # every product v_ra v_rb of a row in one sum over the flat band index (one bincount
+    # instead of p^2 scattered adds)
+    r = np.asarray(cols)[:, :, None]
+    c = np.asarray(cols)[:, None, :]
+    keep = np.broadcast_to(r >= c, (len(cols),) + (cols.shape[1],) * 2)
+    flat = ((r - c) * ab.shape[1] + c)[keep]
+    w = np.broadcast_to(np.asarray(w, float), (len(cols),))
+    prod = (w[:, None, None] * vals[:, :, None] * vals[:, None, :])[keep]
+    ab += np.bincount(flat, prod, minlength=ab.size).reshape(ab.shape)
 
 
 class SeriesSystem:

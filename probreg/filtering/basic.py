@@ -6,7 +6,6 @@ import functools
 
 import numpy as np
 from scipy.ndimage import median_filter
-from scipy.signal import butter, filtfilt
 
 __all__ = ["hampel", "fill_gaps", "butterworth", "keypoint_noise_px", "noise_model"]
 
@@ -117,7 +116,11 @@ def fill_gaps(x, max_gap=10):
 @functools.lru_cache(maxsize=64)
 def _butter_design(order, wn):
     """The low-pass design, computed once per (order, normalised cut-off): scipy's design costs
-    ~1 ms, and the propagation filters thousands of series with a handful of designs."""
+    ~1 ms, and the propagation filters thousands of series with a handful of designs.
+    ``scipy.signal`` is imported here, not with the module: its import (with ``scipy.stats``)
+    takes ~0.7 s, which ``probreg run`` spends in a thread while the lanes are found."""
+    from scipy.signal import butter
+
     b, a = butter(order, wn)
     b.setflags(write=False)
     a.setflags(write=False)
@@ -134,6 +137,8 @@ def butterworth(x, fps, cutoff_hz=6.0, order=4):
     xi = np.interp(np.arange(len(x)), np.flatnonzero(ok), x[ok])
     # filtfilt runs the filter twice: a design of half the order gives the stated order
     # (as Pose2Sim/Sports2D do for their "4th-order" filter)
+    from scipy.signal import filtfilt
+
     b, a = _butter_design(max(order // 2, 1), float(cutoff_hz / (fps / 2)))
     y = filtfilt(b, a, xi, padlen=min(3 * max(len(a), len(b)), len(xi) - 1))
     return np.where(ok, y, np.nan)
