@@ -84,7 +84,25 @@ def run_benchmark(name, args, reports_dir="reports"):
     out = Path(reports_dir)
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"bench_{name}.md"
-    command = "probreg " + " ".join(shlex.quote(a) for a in sys.argv[1:]) if sys.argv[0].endswith(
-        "probreg") else "probreg bench " + name
-    path.write_text(report.to_markdown(command), encoding="utf-8")
+    path.write_text(report.to_markdown(typed_command(name)), encoding="utf-8")
     return path
+
+
+def typed_command(name, argv=None):
+    """The command line a report was made with, options included: ``probreg ...`` as typed, also
+    through ``python -m probreg`` (whose ``argv[0]`` is ``probreg/__main__.py``); called from
+    Python, the plain ``probreg bench NAME``.
+
+    >>> typed_command("batch", ["/x/bin/probreg", "bench", "batch", "--repeats", "12"])
+    'probreg bench batch --repeats 12'
+    >>> typed_command("speed", ["/src/probreg/__main__.py", "bench", "speed", "--suite-dir", "/tmp/a b"])
+    "probreg bench speed --suite-dir '/tmp/a b'"
+    >>> typed_command("speed", ["pytest", "-q"])
+    'probreg bench speed'
+    """
+    argv = sys.argv if argv is None else argv
+    a0 = Path(argv[0]) if argv else Path()
+    typed = a0.name == "probreg" or (a0.name == "__main__.py" and a0.parent.name == "probreg")
+    if typed and argv[1:2] == ["bench"]:
+        return "probreg " + " ".join(shlex.quote(a) for a in argv[1:])
+    return "probreg bench " + name
