@@ -22,13 +22,13 @@ __all__ = ["periodic_smooth", "periodic_smooth_series", "score_noise_scale", "st
 
 # --------------------------------------------------------------------------- cross-stride smoothing
 #: Fewest repeating strides a clip must show for the cross-stride ties (keypoints and angles).
-#: 1.5 is what :func:`stride_period_frames` can measure at all (the lag is searched up to a
-#: third of the clip below its length); from 1.5 strides on, the frames of the first half
-#: stride already have a partner one stride later, and the left/right tie half a stride later
-#: covers nearly every frame.  Chosen on the tuning clips cut to 55 and 65 frames (1.5-1.9
-#: strides; two windows each, exact cameras): knee-angle error 5.98 -> 4.88 deg (55 frames)
-#: and 5.64 -> 3.84 deg (65 frames) against the former 2 strides; one window of 60 got worse
-#: (+0.4 deg).  Clips of 2 strides and more are unchanged.
+#: 1.5 is the least over which :func:`stride_period_frames` measures a period at all (it searches
+#: lags up to two thirds of the clip).  From 1.5 strides on, the frames of the first half stride
+#: have a partner one stride later, and the left/right tie half a stride later reaches nearly
+#: every frame.  The value was chosen on the tuning clips cut to 55 and 65 frames (1.5-1.9
+#: strides; two windows each, exact cameras).  Against the former 2 strides, the knee-angle error
+#: went 5.98 -> 4.88 deg at 55 frames and 5.64 -> 3.84 deg at 65 frames.  Of the 60 windows of
+#: 55 frames, one got worse (+0.4 deg).  Clips of 2 strides and more are unchanged.
 MIN_STRIDES = 1.5
 
 #: Trunk joints (H36M order) whose common motion is the reference point of the relative coordinates.
