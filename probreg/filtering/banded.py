@@ -94,6 +94,23 @@ class SeriesSystem:
         """``R @ v`` (the repeat differences, one per frame with a partner)."""
         return np.sum(self.tie_vals * v[self.tie_cols], axis=1)
 
+    def stride_tie_variance(self, rep, sel, x, sn2, sv2, min_sv, lag_sd_frames):
+        """The stride variability and the stride ties' variances at the fit ``x``:
+        ``(sv2, cvar)``.  ``rep`` are the data's repeat differences (:meth:`tie`), ``sel`` which
+        of them are observed; ``sv2`` (kept when none is) is their variance beyond twice the
+        noise ``sn2`` and the timing term, floored at ``min_sv**2``; each tie's variance is
+        ``2 sv2`` plus its timing uncertainty (the fit's speed times ``lag_sd_frames``)."""
+        timing = (np.abs(np.gradient(x))[self.has] * lag_sd_frames) ** 2
+        if sel.any():
+            sv2 = max((float(np.mean(rep[sel] ** 2 - timing[sel])) - 2 * sn2) / 2, min_sv**2)
+        return sv2, 2 * sv2 + timing
+
+    def noise_variance(self, y, x, ok, edf):
+        """The noise variance of the residuals of fit ``x`` to the observed ``y`` (mask ``ok``):
+        their AR(1) quadratic form over the degrees of freedom left (``edf`` the fit's)."""
+        r = np.where(ok, y - x, 0.0)
+        return max(float(r @ self.qm(r)) / max(int(ok.sum()) - edf, 1.0), 1e-6)
+
     def solve(self, y0, sn2, cvar):
         """Fit and effective degrees of freedom ``tr((Qm + sn2 R' diag(1/cvar) R + P2)^-1 Qm)``
         (``y0``: the data with missing frames at 0).  Raises ``numpy.linalg.LinAlgError`` when

@@ -233,7 +233,6 @@ def periodic_smooth_pair(y_l, y_r, lag, fps, rho=0.0, smooth_cutoff_hz=14.0, lag
         return alone()
     offset = X @ _shrunk_harmonics(X[psel], prep[psel])
     prep = prep - offset
-    n_ok = [int(o.sum()) for o in oks]
     # start: all repeat differences read as noise, the sides as symmetric as the floor allows
     sn2 = [max(float(np.mean(r[s] ** 2)) / 2, 1e-6) if s.any() else float(np.var(v))
            for r, s, v in zip(rep, sel, yi)]
@@ -244,10 +243,8 @@ def periodic_smooth_pair(y_l, y_r, lag, fps, rho=0.0, smooth_cutoff_hz=14.0, lag
     for it in range(rounds):
         cvars = []
         for s, S in enumerate(system.series):
-            timing = (np.abs(np.gradient(x[s]))[S.has] * lag_sd_frames) ** 2
-            if sel[s].any():
-                sv2[s] = max((float(np.mean(rep[s][sel[s]] ** 2 - timing[sel[s]])) - 2 * sn2[s]) / 2, min_sv**2)
-            cvars.append(2 * sv2[s] + timing)
+            sv2[s], cvar = S.stride_tie_variance(rep[s], sel[s], x[s], sn2[s], sv2[s], min_sv, lag_sd_frames)
+            cvars.append(cvar)
         vel = np.ravel(np.column_stack([np.abs(np.gradient(v)) for v in x]))
         ptiming = (vel[system.pair_cols[:, 0]] * lag_sd_frames) ** 2
         if psel.any():
@@ -260,9 +257,7 @@ def periodic_smooth_pair(y_l, y_r, lag, fps, rho=0.0, smooth_cutoff_hz=14.0, lag
         x = [z[0::2], z[1::2]]
         if last:  # the noise variances the fit used are the ones reported
             break
-        for s in range(2):
-            r = np.where(oks[s], ys[s] - x[s], 0.0)
-            sn2[s] = max(float(r @ system.series[s].qm(r)) / max(n_ok[s] - edf[s], 1.0), 1e-6)
+        sn2 = [S.noise_variance(y, v, o, e) for S, y, v, o, e in zip(system.series, ys, x, oks, edf)]
     return (x[0], x[1]), {"noise_sd": tuple(float(np.sqrt(v)) for v in sn2),
                           "stride_sd": tuple(float(np.sqrt(v)) for v in sv2), "asym_sd": float(np.sqrt(sa2)),
                           "asym_systematic_sd": float(np.std(offset[psel]))}

@@ -354,29 +354,22 @@ def periodic_smooth_series(y, lag, fps, rho=0.0, smooth_cutoff_hz=14.0, lag_sd_f
     t = np.arange(F)
     wc = 2 * np.pi * smooth_cutoff_hz / fps
     system = SeriesSystem(ok, lag, rho, p2_scale=1.0 / (2 - 2 * np.cos(min(wc, np.pi))) ** 2)
-    has = system.has
     yi = np.interp(t, t[ok], y[ok])
     y0 = np.where(ok, y, 0.0)
     rep = system.tie(yi)
-    sel = ok[has]
+    sel = ok[system.has]
     x = yi
-    n_ok = int(ok.sum())
     # start: all repeat differences read as noise
     sn2 = max(float(np.mean(rep[sel] ** 2)) / 2, 1e-6) if sel.any() else float(np.var(yi))
     sv2 = min_sv**2
     for _ in range(iters):
-        vel = np.abs(np.gradient(x))
-        timing = (vel[has] * lag_sd_frames) ** 2
-        if sel.any():
-            sv2 = max((float(np.mean(rep[sel] ** 2 - timing[sel])) - 2 * sn2) / 2, min_sv**2)
-        cvar = 2 * sv2 + timing
+        sv2, cvar = system.stride_tie_variance(rep, sel, x, sn2, sv2, min_sv, lag_sd_frames)
         # scaled by sn2: (Qm + sn2 * prior) x = Qm y, whose hat matrix is (...)^-1 Qm
         try:
             x, edf = system.solve(y0, sn2, cvar)
         except np.linalg.LinAlgError:  # singular: leave the series as it is
             return y.copy(), {"noise_sd": float("nan"), "stride_sd": float("nan")}
-        r = np.where(ok, y - x, 0.0)
-        sn2 = max(float(r @ system.qm(r)) / max(n_ok - edf, 1.0), 1e-6)
+        sn2 = system.noise_variance(y, x, ok, edf)
     return x, {"noise_sd": float(np.sqrt(sn2)), "stride_sd": float(np.sqrt(sv2))}
 
 

@@ -91,7 +91,7 @@ class LiftConfig:
     angle_smooth_cutoff_hz: float = 14.0
     # left and right sides of each angle smoothed together, tied half a stride apart, their
     # asymmetry sd floored at this (deg; None: each side alone).  Knee error with the true
-    # cameras on the 30 tuning clips 3.60 -> 3.26 deg; the floor is the most symmetric
+    # cameras on the 30 tuning clips 3.60 -> 3.31 deg (3.30 with 2 rounds); the floor is the most symmetric
     # runner's of the CMU running mocap (probreg.filtering.pair)
     left_right_min_sd_deg: float | None = 2.0
     noise_floor_px: float = 1.5
