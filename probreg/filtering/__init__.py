@@ -3,7 +3,17 @@ and cross-stride smoothing that uses the repetition of running strides
 (:func:`clean_keypoints` chooses the method from the clip's noise).
 """
 
-from .basic import butterworth, fill_gaps, hampel, keypoint_noise_px, noise_model
+from .basic import (
+    NOISE_FLOOR_LEG_FRAC,
+    NOISE_FLOOR_PX,
+    butterworth,
+    fill_gaps,
+    hampel,
+    keypoint_noise_px,
+    keypoints_noisy,
+    leg_length_px,
+    noise_model,
+)
 from .clean import clean_keypoints, detection_status
 from .pair import periodic_smooth_pair
 from .periodic import (
@@ -16,6 +26,7 @@ from .periodic import (
 
 __all__ = [
     "hampel", "fill_gaps", "butterworth", "clean_keypoints", "detection_status", "keypoint_noise_px", "noise_model",
+    "keypoints_noisy", "leg_length_px", "NOISE_FLOOR_PX", "NOISE_FLOOR_LEG_FRAC",
     "periodic_smooth", "periodic_smooth_pair", "periodic_smooth_series", "score_noise_scale", "stride_lags",
     "stride_period_frames",
 ]

@@ -6,9 +6,12 @@ from __future__ import annotations
 import numpy as np
 
 from .basic import (
+    NOISE_FLOOR_LEG_FRAC,
+    NOISE_FLOOR_PX,
     butterworth,
     fill_gaps,
     hampel,
+    keypoints_noisy,
     noise_model,
 )
 from .periodic import periodic_smooth
@@ -17,7 +20,7 @@ __all__ = ["clean_keypoints", "detection_status"]
 
 
 def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=3.0, max_gap=10,
-                    noise_floor_px=1.5):
+                    noise_floor_px=NOISE_FLOOR_PX, noise_floor_leg_frac=NOISE_FLOOR_LEG_FRAC):
     """Hampel outlier rejection, short-gap filling and zero-phase low-pass of every coordinate.
 
     Parameters
@@ -27,7 +30,8 @@ def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=
     fps : float
     cutoff_hz : float, "auto" or None
         Low-pass cut-off (None: no low-pass; "auto": when the estimated detection
-        noise exceeds ``noise_floor_px``, cross-stride smoothing
+        noise exceeds ``noise_floor_px`` or, when less, ``noise_floor_leg_frac`` of the legs'
+        image length (:func:`probreg.filtering.keypoints_noisy`), cross-stride smoothing
         (:func:`periodic_smooth`) or, for clips without repeating strides, a 7 Hz
         Butterworth low-pass; otherwise none: a low-pass also flattens the true
         knee-flexion peaks, so clean keypoints are better left alone).
@@ -39,7 +43,7 @@ def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=
     """
     kp = np.asarray(keypoints_px, float)
     noise = noise_model(kp)[0] if kp.shape[1] == 17 else np.inf
-    noisy = not np.isfinite(noise) or noise > noise_floor_px
+    noisy = keypoints_noisy(kp, noise, noise_floor_px, noise_floor_leg_frac)
     periodic = cutoff_hz == "auto" and noisy
     if cutoff_hz == "auto":
         cutoff_hz = 7.0 if noisy else None

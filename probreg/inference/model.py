@@ -60,7 +60,7 @@ from ..calibration.registration import (
     glitch_vote,
     lane_anchor_shift,
 )
-from ..filtering import clean_keypoints, noise_model, stride_lags
+from ..filtering import clean_keypoints, keypoints_noisy, noise_model, stride_lags
 from ..geometry import JOINT_INDEX, SEGMENT_BONES
 from ..geometry.rays import CameraArrays, _as_list
 from ..lifting import LiftConfig
@@ -157,7 +157,8 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self.F = len(self.kp)
         # stride timing for the cross-stride angle smoothing of every lifting (None: no
         # repeating strides, or keypoints too clean to need it -- as in lift()'s "auto")
-        noisy = not np.isfinite(self.noise_sd) or self.noise_sd > LiftConfig().noise_floor_px
+        cfg = LiftConfig()
+        noisy = keypoints_noisy(self.raw, self.noise_sd, cfg.noise_floor_px, cfg.noise_floor_leg_frac)
         self.stride_lag = stride_lags(self.kp, self.fps) if noisy else None
         self.branch = branch
         self.track_weight = float(track_weight)

@@ -23,7 +23,10 @@ from dataclasses import dataclass, field
 import numpy as np
 
 from ..filtering import (
+    NOISE_FLOOR_LEG_FRAC,
+    NOISE_FLOOR_PX,
     clean_keypoints,
+    keypoints_noisy,
     noise_model,
     periodic_smooth_pair,
     periodic_smooth_series,
@@ -94,7 +97,11 @@ class LiftConfig:
     # cameras on the 30 tuning clips 3.60 -> 3.31 deg (3.30 with 2 rounds); the floor is the most symmetric
     # runner's of the CMU running mocap (probreg.filtering.pair)
     left_right_min_sd_deg: float | None = 2.0
-    noise_floor_px: float = 1.5
+    # keypoints count as noisy (cleaned, angles smoothed across strides) above this noise (px),
+    # or above this fraction of the legs' image length when that is less
+    # (:func:`probreg.filtering.keypoints_noisy`; None: the pixel floor alone)
+    noise_floor_px: float = NOISE_FLOOR_PX
+    noise_floor_leg_frac: float | None = NOISE_FLOOR_LEG_FRAC
 
 
 @dataclass(frozen=True)
@@ -444,10 +451,11 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
     raw_missing = ~np.all(np.isfinite(kp), -1)
     cross = config.cross_stride_angles
     if cross == "auto":  # the same rule as the cross-stride keypoint cleaning
-        noise = noise_model(kp)[0]
-        cross = config.smooth_cutoff_hz == "auto" and (not np.isfinite(noise) or noise > config.noise_floor_px)
+        cross = config.smooth_cutoff_hz == "auto" and keypoints_noisy(kp, noise_model(kp)[0], config.noise_floor_px,
+                                                                      config.noise_floor_leg_frac)
     if config.smooth_cutoff_hz is not None:
-        kp = clean_keypoints(kp, fps, cutoff_hz=config.smooth_cutoff_hz, noise_floor_px=config.noise_floor_px)
+        kp = clean_keypoints(kp, fps, cutoff_hz=config.smooth_cutoff_hz, noise_floor_px=config.noise_floor_px,
+                             noise_floor_leg_frac=config.noise_floor_leg_frac)
     F = len(kp)
     cams = cameras if isinstance(cameras, CameraArrays) else camera_arrays(cameras)
     if len(cams.valid) != F:
