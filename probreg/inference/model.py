@@ -66,6 +66,7 @@ from ..geometry.rays import CameraArrays, _as_list
 from ..lifting import LiftConfig
 from ..lifting.trajectory import _runs, camera_track_config, fit_ground_track
 from .bands import stance_window
+from .camera_path import CameraPath
 from .heights import HEIGHT_SYSTEMATIC_SD, height_grid, identity_height, limb_consistency, smear_log_likelihood
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
 from .parallel import default_workers, fork_map
@@ -164,6 +165,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self.track_weight = float(track_weight)
         self.limb_consistency_weight = float(limb_consistency_weight)
         self.max_gap_frames = 25
+        self.camera_path = None
         self._build_branches()
         if not self.valid.any():
             raise NoCalibrationError(f"no frame has a usable calibration family on the {branch} branch "
@@ -320,8 +322,10 @@ class ClipModel(DrawPropagation, EmceeSampling):
             return float("nan")
         return float(np.median(np.where(np.isfinite(s[frames]), s[frames], np.inf)))
 
-    def cameras_at(self, height_m, offsets=None):
-        """Per-frame cameras of the family member at ``height_m`` as CameraArrays."""
+    def cameras_at(self, height_m, offsets=None, smooth=True):
+        """Per-frame cameras of the family member at ``height_m`` as CameraArrays, their path
+        smoothed in time (:func:`probreg.inference.camera_path.smooth_camera_path`; ``smooth``
+        False: each frame's own member)."""
         F = self.F
         ia, ib, t, reach = self._brackets(height_m)
         valid = self.valid & reach
@@ -362,7 +366,9 @@ class ClipModel(DrawPropagation, EmceeSampling):
             dist = np.array([self.lens.camera_k1(f), 0.0, 0.0, 0.0, 0.0])  # f: NaN without valid frames
         else:
             dist = np.zeros(5) if self.dist is None else self.dist
-        return CameraArrays(valid=valid, C=C, R=R, focal_px=f, principal_px=self.pp, dist=dist)
+        cams = CameraArrays(valid=valid, C=C, R=R, focal_px=f, principal_px=self.pp, dist=dist)
+        path = getattr(self, "camera_path", None)
+        return path(cams) if smooth and path is not None else cams
 
     def _fix_offsets(self, final=False):
         """Lane-index offsets (frame to frame and to the athlete's lane) at the reference height, or the
@@ -391,9 +397,12 @@ class ClipModel(DrawPropagation, EmceeSampling):
         h_id = self._identity_h = identity_height(np.geomspace(lo, hi, 17), self.member_sensitivity, lambda h: int(
             np.isfinite(self._focal_at(h)[self.valid]).sum()), self.h_ref)
         self.offsets = np.asarray(reg.track_offsets(seq, h_id), int)
-        cams = self.cameras_at(h_id, offsets=self.offsets)
+        cams = self.cameras_at(h_id, offsets=self.offsets, smooth=False)
         self.offsets = self.offsets + lane_anchor_shift(athlete_ground_track(_as_list(cams), self.kp),
                                                         self.athlete_lane, reg.lane_width_m)
+        # the path's noise, measured where the lines' identities are settled (every height's
+        # cameras are then smoothed as much as that noise asks: probreg.inference.camera_path)
+        self.camera_path = CameraPath.from_cameras(self.cameras_at(h_id, smooth=False), self.gap_distance == 0)
 
     # ------------------------------------------------------------------ likelihood on a grid
     def _precompute(self):
@@ -419,7 +428,8 @@ class ClipModel(DrawPropagation, EmceeSampling):
         zoom = self.lens.evidence.zoom if self.lens is not None else np.ones(self.F)
         pelvis = self.kp[:, JOINT_INDEX["pelvis"], :2]
         for g, h in enumerate(self.grid):
-            cams = self.cameras_at(h)
+            raw = self.cameras_at(h, smooth=False)  # each frame's own member: the static term's spread
+            cams = self.camera_path(raw) if self.camera_path is not None else raw
             if cams.valid.any():
                 self.f_ref_grid[g] = float(np.nanmedian(cams.focal_px[cams.valid] / zoom[cams.valid]))
             if cams.valid.sum() < 3:
@@ -434,7 +444,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
             self.ll_track[g] = tr.log_likelihood / n_meas if np.isfinite(tr.log_likelihood) else -1e3
             # static camera: one lateral position for all frames (residuals relative to the
             # camera-athlete distance, scored once every height is seen: probreg.inference.static)
-            ys = cams.C[cams.valid, 1]
+            ys = raw.C[raw.valid, 1]
             with warnings.catch_warnings():  # no track where this height has cameras: from the track's y = 0
                 warnings.simplefilter("ignore", RuntimeWarning)
                 lateral = np.nanmedian(tr.position_m[:, 1])
@@ -442,9 +452,9 @@ class ClipModel(DrawPropagation, EmceeSampling):
             # a frame with lanes whose family has no member at this height (h beyond the
             # frame's branch) counts like a frame 10 % off the common position: otherwise a
             # height reached by a few odd frames only would be scored on those frames alone
-            no_member = self.valid & ~(cams.valid & (self.gap_distance == 0))
+            no_member = self.valid & ~(raw.valid & (self.gap_distance == 0))
             static_parts[g] = ((ys - np.median(ys)) / dist, int(no_member.sum()),
-                               member_jitter(cams.C[:, 1], cams.valid & (self.gap_distance == 0), dist))
+                               member_jitter(raw.C[:, 1], raw.valid & (self.gap_distance == 0), dist))
             self._segment_stats(g, cams, tr)
             slides[g] = self._slides(cams, tr)
         self.ll_static = score_static(static_parts, len(self.grid), n_frames)[0]
