@@ -7,6 +7,8 @@ import functools
 import numpy as np
 from scipy.ndimage import median_filter
 
+from ..geometry import JOINT_INDEX
+
 __all__ = ["hampel", "fill_gaps", "butterworth", "keypoint_noise_px", "noise_model", "leg_length_px",
            "keypoints_noisy", "NOISE_FLOOR_PX", "NOISE_FLOOR_LEG_FRAC"]
 
@@ -22,8 +24,8 @@ NOISE_FLOOR_PX = 1.5
 #: ``probreg.sim.heldout``'s generator, a seed outside the held-out set)
 NOISE_FLOOR_LEG_FRAC = 0.0086
 
-#: H36M-17 hip, knee and ankle of the left and right leg
-_LEGS = ((4, 5, 6), (1, 2, 3))
+#: hip, knee and ankle of the left and right leg (H36M-17 indices)
+_LEGS = tuple(tuple(JOINT_INDEX[f"{side}_{j}"] for j in ("hip", "knee", "ankle")) for side in "lr")
 
 
 def leg_length_px(keypoints_px):

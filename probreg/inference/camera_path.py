@@ -38,7 +38,7 @@ from dataclasses import dataclass, replace
 
 import numpy as np
 
-__all__ = ["PATH_NOISE_GATE", "PATH_PROCESS_SD", "CameraPath", "path_noise_var", "whittaker_system"]
+__all__ = ["PATH_NOISE_GATE", "PATH_PROCESS_SD", "CameraPath", "along_path", "path_noise_var", "whittaker_system"]
 
 #: process sd per frame^2 of the path's series: rotation (rad) and log focal length as the
 #: vanishing-point smoother's, lateral position (m) of the static camera
@@ -92,20 +92,16 @@ def whittaker_system(weights, lam):
 
     w = np.asarray(weights, float)
     F = len(w)
-    ab = np.zeros((3, F))  # upper form: ab[2] diagonal, ab[1] first, ab[0] second superdiagonal
-    if F >= 3:
-        main = np.zeros(F)
-        off1 = np.zeros(F - 1)
-        off2 = np.ones(F - 2)
-        for k, c in enumerate((1.0, -2.0, 1.0)):  # each row of D: (1, -2, 1) at t, t + 1, t + 2
-            main[k:F - 2 + k] += c * c
-        off1[:F - 2] += -2.0
-        off1[1:F - 1] += -2.0
-        ab[2] = w + lam * main
-        ab[1, 1:] = lam * off1
-        ab[0, 2:] = lam * off2
-    else:
-        ab[2] = w + 1e-12
+    # D'D in upper band storage: ab[2] the diagonal, ab[1] the first, ab[0] the second superdiagonal
+    # (each row of D is (1, -2, 1) at t, t + 1, t + 2)
+    ab = np.zeros((3, F))
+    for k, c in enumerate((1.0, -2.0, 1.0)):
+        ab[2, k:F - 2 + k] += c * c
+    ab[1, 1:F - 1] -= 2.0
+    ab[1, 2:F] -= 2.0
+    ab[0, 2:] = 1.0
+    ab = lam * ab
+    ab[2] += w
     return cholesky_banded(ab, lower=False, check_finite=False)
 
 
@@ -181,9 +177,6 @@ class CameraPath:
         same = np.array_equal(use, self.measured)
         out = {}
         for key, z in series.items():
-            if self.lam[key] <= 0:
-                out[key] = z
-                continue
             factor = self.factors[key] if same else _factor(use.astype(float), self.lam[key])
             out[key] = z if factor is None else cho_solve_banded((factor, False), np.where(use, z, 0.0),
                                                                  check_finite=False)
@@ -193,6 +186,12 @@ class CameraPath:
         f[valid] = np.exp(out["log_focal"][valid])
         C[valid, 1] = out["lateral"][valid]
         return replace(cams, R=R, focal_px=f, C=C)
+
+
+def along_path(path, cams):
+    """``cams`` smoothed by ``path`` (a :class:`CameraPath`), or as they are when ``path`` is None
+    (a clean path, or too few frames to measure it)."""
+    return cams if path is None else path(cams)
 
 
 def _factor(weights, lam):

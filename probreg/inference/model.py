@@ -66,7 +66,7 @@ from ..geometry.rays import CameraArrays, _as_list
 from ..lifting import LiftConfig
 from ..lifting.trajectory import _runs, camera_track_config, fit_ground_track
 from .bands import stance_window
-from .camera_path import CameraPath
+from .camera_path import CameraPath, along_path
 from .heights import HEIGHT_SYSTEMATIC_SD, height_grid, identity_height, limb_consistency, smear_log_likelihood
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
 from .parallel import default_workers, fork_map
@@ -324,8 +324,8 @@ class ClipModel(DrawPropagation, EmceeSampling):
 
     def cameras_at(self, height_m, offsets=None, smooth=True):
         """Per-frame cameras of the family member at ``height_m`` as CameraArrays, their path
-        smoothed in time (:func:`probreg.inference.camera_path.smooth_camera_path`; ``smooth``
-        False: each frame's own member)."""
+        smoothed in time when it is noisy (:class:`probreg.inference.camera_path.CameraPath`;
+        ``smooth`` False: each frame's own member)."""
         F = self.F
         ia, ib, t, reach = self._brackets(height_m)
         valid = self.valid & reach
@@ -367,8 +367,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
         else:
             dist = np.zeros(5) if self.dist is None else self.dist
         cams = CameraArrays(valid=valid, C=C, R=R, focal_px=f, principal_px=self.pp, dist=dist)
-        path = getattr(self, "camera_path", None)
-        return path(cams) if smooth and path is not None else cams
+        return along_path(self.camera_path, cams) if smooth else cams
 
     def _fix_offsets(self, final=False):
         """Lane-index offsets (frame to frame and to the athlete's lane) at the reference height, or the
@@ -401,8 +400,9 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self.offsets = self.offsets + lane_anchor_shift(athlete_ground_track(_as_list(cams), self.kp),
                                                         self.athlete_lane, reg.lane_width_m)
         # the path's noise, measured where the lines' identities are settled (every height's
-        # cameras are then smoothed as much as that noise asks: probreg.inference.camera_path)
-        self.camera_path = CameraPath.from_cameras(self.cameras_at(h_id, smooth=False), self.gap_distance == 0)
+        # cameras are then smoothed as much as that noise asks: probreg.inference.camera_path;
+        # the anchor's shift of all offsets by whole lanes does not change it)
+        self.camera_path = CameraPath.from_cameras(cams, self.gap_distance == 0)
 
     # ------------------------------------------------------------------ likelihood on a grid
     def _precompute(self):
@@ -429,7 +429,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
         pelvis = self.kp[:, JOINT_INDEX["pelvis"], :2]
         for g, h in enumerate(self.grid):
             raw = self.cameras_at(h, smooth=False)  # each frame's own member: the static term's spread
-            cams = self.camera_path(raw) if self.camera_path is not None else raw
+            cams = along_path(self.camera_path, raw)
             if cams.valid.any():
                 self.f_ref_grid[g] = float(np.nanmedian(cams.focal_px[cams.valid] / zoom[cams.valid]))
             if cams.valid.sum() < 3:
