@@ -354,16 +354,17 @@ def test_lines_measured_in_one_batch_equal_lines_measured_alone():
 
 
 def _faint_lanes_image(contrast, spacing_px, rng, W=1920, H=1080, width=2.0, noise=2.0):
-    """Six lane lines ``contrast`` grey levels above a red track, ``spacing_px`` apart at the
-    left edge and converging to a vanishing point far right (5.4-8 px apart at the right edge for
-    8 px), 2 px wide, anti-aliased, with sensor noise."""
+    """Six lane lines ``contrast`` grey levels above a red track, the nearest two about
+    ``spacing_px`` apart at the left edge, equally spaced on the ground (their positions a 1-D
+    projective map of the line index, as a camera makes them) and converging to a vanishing
+    point far right, 2 px wide, anti-aliased, with sensor noise."""
     img = np.zeros((H, W, 3), np.float32)
     img[:] = (70, 80, 170)
     vp = np.array([6000.0, -900.0])
     xx, yy = np.arange(W), np.arange(H)[:, None]
     lines = []
     for k in range(6):
-        y0 = 300 + k * (spacing_px + 6 * k)
+        y0 = 300 + spacing_px * k / (1 - 0.08 * k)
         yc = y0 + (vp[1] - y0) / vp[0] * xx
         img += contrast * np.clip(width / 2 + 0.5 - np.abs(yy - yc[None, :]), 0, 1)[..., None]
         lines.append(np.cross([0.0, y0, 1.0], [vp[0], vp[1], 1.0]))
@@ -517,3 +518,42 @@ def test_a_straight_edge_off_the_lanes_comb_is_left_out():
         assert errs[k] < 0.5 and ln.index - fl.lines[0].index == k - int(np.argmin(
             [np.abs(-(fl.lines[0].line[0] * xs + fl.lines[0].line[2]) / fl.lines[0].line[1]
                     - (y0 + (yv0 - y0) * xs / xv0)).max() for y0, yv0, xv0 in truth]))
+
+
+def test_far_lines_a_grazing_camera_cannot_resolve_are_left_out(tmp_path, monkeypatch):
+    # a grazing set-up of the held-out generator (seed 10039, a tuning seed outside the held-out
+    # range): camera 3.4 m high, the far lane lines 5 px apart; in frames 0, 10, 30 and 50 the two
+    # farthest lines were measured as one clean line between them, ~2 px off both, which the
+    # equally spaced comb absorbed (and the calibration then put the camera 188 % too high).
+    # The tighter comb bound leaves it out in frames 30 and 50; in 0 and 10 it still fits the
+    # comb within the bound (known, docs/method.md)
+    from probreg.io.clip import read_cameras_json
+    from probreg.lanes import detection
+    from probreg.sim.heldout import write_heldout
+
+    clip = write_heldout(tmp_path, seeds=[10039], jobs=1)[0]
+    cams = read_cameras_json(clip / "groundtruth" / "cameras.json", image_size=(1920, 1080))
+
+    def worst_offset_px(i):
+        """Largest distance (px, at the image's centre column) of a detected line from every true one."""
+        img = cv2.imread(str(clip / "frames" / f"{i:06d}.jpg"))
+        fl = detect_lanes(img, frame=i)
+        cam, w = cams.get(i), img.shape[1]
+        X = np.linspace(cam.C[0] - 300, cam.C[0] + 300, 20001)
+        true_y = []
+        for k in range(9):
+            uv, depth = cam.project(np.column_stack([X, np.full_like(X, -1.22 * k), np.zeros_like(X)]),
+                                    return_depth=True)
+            near = (depth > 0) & (np.abs(uv[:, 0] - w / 2) < 50)
+            if near.any():
+                true_y.append(uv[near][np.argmin(np.abs(uv[near, 0] - w / 2)), 1])
+        ys = [-(ln.line[0] * w / 2 + ln.line[2]) / ln.line[1] for ln in fl.lines]
+        assert fl.ok and len(ys) >= 4  # the near lines stay
+        return max(min(abs(y - t) for t in true_y) for y in ys)
+
+    frames = (30, 50)
+    assert max(worst_offset_px(i) for i in frames) < 1.0
+    # the bound before (10 % of a step) kept the merged line: the clip does hold the failure
+    monkeypatch.setattr(detection, "_off_comb",
+                        lambda *a, _f=detection._off_comb: _f(*a[:4], frac=0.1))
+    assert max(worst_offset_px(i) for i in frames) > 1.5
