@@ -89,6 +89,11 @@ def keypoint_noise_px(keypoints_px, joints=(0, 7, 8)):
     return float(1.4826 * np.median(np.abs(d2)) / np.sqrt(12))
 
 
+#: the largest frame-to-frame noise correlation :func:`noise_model` fits (beyond it the differences
+#: over 1-3 frames cannot tell the noise's level from its correlation)
+NOISE_RHO_MAX = 0.9
+
+
 def noise_model(keypoints_px, joints=(0, 7, 8), lags=(1, 2, 3)):
     """Detector noise of a clip: per-coordinate sd (px) and frame-to-frame correlation.
 
@@ -123,7 +128,7 @@ def noise_model(keypoints_px, joints=(0, 7, 8), lags=(1, 2, 3)):
     v = np.array(v)
     if not np.all(np.isfinite(v)) or np.any(v <= 0):
         return float("nan"), 0.0
-    r = np.linspace(0.0, 0.9, 181)[:, None]
+    r = np.linspace(0.0, NOISE_RHO_MAX, 181)[:, None]
     g = 2 * (1 - r ** np.asarray(lags)[None, :])  # (R, K): variance per unit s^2
     log_s2 = np.mean(np.log(v)[None] - np.log(g), axis=1)
     cost = np.sum((np.log(v)[None] - np.log(g) - log_s2[:, None]) ** 2, axis=1)

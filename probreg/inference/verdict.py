@@ -70,6 +70,17 @@ reason of its own, a short machine-readable string with the number that triggere
 ``prior-dominated height (...)``
     the camera height's posterior is hardly narrower than its prior: the clip did not
     measure it, and every metric number rests on the prior.
+``keypoint noise unidentified (...)``
+    the detector-noise model (:func:`probreg.filtering.noise_model`: an AR(1) process fitted to
+    the trunk's differences over 1-3 frames) put the noise's frame-to-frame correlation at the
+    top of its range, :attr:`VerdictThresholds.max_noise_rho` (0.9).  There the differences
+    grow almost linearly with the lag, as they do for a slow drift: only ``s^2 (1 - rho)`` is
+    measured, not the noise level ``s`` itself, and noise that slow is not told from motion by
+    the smoothing.  The keypoint cleaning, the bootstrap that re-simulates the noise and so the
+    bands all rest on that level.  (Of the 76 calibrated tuning clips, ``probreg.sim.heldout``
+    seeds 8101-8960 and 10007-10073, two reached the bound, both with knee bands over 30° wide:
+    wide near view 8934, the only unflagged tuning clip above 6° knee error (6.2°), and grazing
+    view 10064 (3.6°); the next highest correlation was 0.85.)
 """
 
 from __future__ import annotations
@@ -78,6 +89,7 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from ..filtering.basic import NOISE_RHO_MAX
 from ..geometry import JOINT_INDEX
 
 __all__ = ["VerdictThresholds", "clip_verdict", "bone_length_cv", "posterior_modes"]
@@ -101,6 +113,7 @@ class VerdictThresholds:
     min_prior_tail: float = 0.001
     max_member_sensitivity: float = 3.3
     min_lane_agreement: float = 0.8
+    max_noise_rho: float = NOISE_RHO_MAX
 
 
 def bone_length_cv(joints_track_m):
@@ -168,7 +181,7 @@ def posterior_modes(samples, min_rel_height=0.1, max_dip=0.5, n_grid=512):
 def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, log_height_draws=None,
                  log_height_prior_sd=None, side=None, bone_cv_pct=None, speed_mps=None,
                  stature_draws=None, stature_prior=None, branch=None, member_sensitivity=None,
-                 lanes_agree=None, thresholds: VerdictThresholds = VerdictThresholds()):
+                 lanes_agree=None, noise_rho=None, thresholds: VerdictThresholds = VerdictThresholds()):
     """The clip verdict and its reasons.
 
     Parameters
@@ -203,6 +216,8 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
     lanes_agree : (int, int), optional
         Frames whose own lanes admit the clip's camera, and frames with a camera whose own lanes
         were found.
+    noise_rho : float, optional
+        The detector noise's frame-to-frame correlation (:func:`probreg.filtering.noise_model`).
 
     Returns
     -------
@@ -218,6 +233,8 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
     ('uncalibrated', ['frames_with_angles 0/100', 'calibrated_frames 0/100'])
     >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, lanes_agree=(41, 100))
     ('unreliable', ['lanes_agree_frames 41/100'])
+    >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, noise_rho=0.9)
+    ('unreliable', ['keypoint noise unidentified (frame-to-frame correlation 0.90, the bound of the noise model)'])
     """
     t = thresholds
     reasons, uncal = [], False
@@ -266,5 +283,8 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
         if tail < t.min_prior_tail:
             reasons.append(f"stature prior conflict (posterior {med:.2f} m, prior {stature_prior.mean:.2f} "
                            f"+- {stature_prior.sd:.2f} m)")
+    if noise_rho is not None and np.isfinite(noise_rho) and noise_rho >= t.max_noise_rho - 1e-9:
+        reasons.append(f"keypoint noise unidentified (frame-to-frame correlation {noise_rho:.2f}, "
+                       "the bound of the noise model)")
     verdict = "uncalibrated" if uncal else ("unreliable" if reasons else "ok")
     return verdict, reasons

@@ -146,3 +146,31 @@ def test_lanes_that_mostly_do_not_fit_the_camera_are_unreliable():
     assert clip_verdict(**GOOD, lanes_agree=(80, 100)) == ("ok", [])
     assert clip_verdict(**GOOD, lanes_agree=(60, 70)) == ("ok", [])
     assert clip_verdict(**GOOD, lanes_agree=(0, 0)) == ("ok", [])
+
+
+def _trunk_with_noise(rng, rho, sd=3.0, F=250):
+    """Keypoints of a still trunk (pelvis, spine, thorax) plus AR(1) noise of correlation ``rho``."""
+    from probreg.inference.propagation import _ar1_noise
+
+    kp = np.zeros((F, 17, 3))
+    kp[..., 2] = 1.0
+    kp[:, :, 1] = 500.0 - 10.0 * np.arange(17)  # joints apart, all still
+    kp[..., :2] += _ar1_noise(rng, (F, 17, 2), sd, rho)
+    return kp
+
+
+def test_keypoint_noise_at_the_noise_models_bound_is_unreliable():
+    from probreg.filtering import noise_model
+    from probreg.filtering.basic import NOISE_RHO_MAX
+
+    rng = np.random.default_rng(3)
+    # moderately correlated noise: measured inside the model's range, no reason
+    sd, rho = noise_model(_trunk_with_noise(rng, 0.5))
+    assert abs(sd - 3.0) < 0.5 and abs(rho - 0.5) < 0.15
+    assert clip_verdict(**GOOD, noise_rho=rho) == ("ok", [])
+    # a slow drift (correlation 0.99): the fit ends at its bound, where the level is not identified
+    sd, rho = noise_model(_trunk_with_noise(rng, 0.99))
+    assert rho == NOISE_RHO_MAX
+    verdict, reasons = clip_verdict(**GOOD, noise_rho=rho)
+    assert verdict == "unreliable"
+    assert reasons == ["keypoint noise unidentified (frame-to-frame correlation 0.90, the bound of the noise model)"]
