@@ -408,16 +408,88 @@ class LensModel:
                 **self.evidence.to_dict()}
 
 
-def _zoom_ratios(reg, height_m):
-    """Each frame's focal length relative to the clip's median, from the families of the lines
-    at ``height_m`` (ratios between frames hardly depend on the height), smoothed over time
-    with a 25-frame running median; frames without a member get their neighbours' ratio.
-    Also returns the reference (median) focal length."""
-    F = len(reg.frame_lanes)
-    f = np.full(F, np.nan)
+#: camera heights (m) scanned for the frames' zoom ratios when the families at the prior's centre
+#: height do not give a regular focal-length series (:func:`_zoom_ratios`): every broadcast position
+ZOOM_SCAN_HEIGHTS_M = tuple(np.geomspace(2.0, 40.0, 14))
+#: a frame-to-frame change of the focal length above this (log) is no zoom but a family that
+#: folds over at that height (two members of very different focal length either side of it)
+ZOOM_JUMP_LOG = 0.05
+#: a series with at most this share of such jumps is regular (an odd misread frame, which the
+#: running median of :func:`_zoom_ratios` drops)
+ZOOM_JUMP_SHARE = 0.02
+
+
+def _focal_series(reg, height_m):
+    """Each frame's focal length of its family's member at ``height_m`` (NaN without one)."""
+    f = np.full(len(reg.frame_lanes), np.nan)
     for i, m in enumerate(reg.sequence.members_at_height(height_m)):
         if m is not None:
             f[i] = m.focal_px
+    return f
+
+
+def _series_quality(f):
+    """``(coverage, jumps, roughness)`` of a focal-length series: the share of frames with a
+    member, the share of consecutive frame pairs whose focal length jumps by more than
+    :data:`ZOOM_JUMP_LOG` (log), and the median absolute second difference of ``log f``.
+
+    >>> f = np.r_[np.full(10, 1000.0), np.full(10, 60.0)]
+    >>> cover, jumps, rough = _series_quality(f)
+    >>> float(cover), round(float(jumps), 3), float(rough)
+    (1.0, 0.053, 0.0)
+    """
+    ok = np.isfinite(f)
+    g = np.log(np.where(ok, f, 1.0))
+    d1 = np.abs(np.diff(g))[ok[1:] & ok[:-1]]
+    d2 = np.abs(np.diff(g, 2))[ok[2:] & ok[1:-1] & ok[:-2]]
+    return (float(ok.mean()) if len(f) else 0.0, float(np.mean(d1 > ZOOM_JUMP_LOG)) if len(d1) else 0.0,
+            float(np.median(d2)) if len(d2) else np.inf)
+
+
+def _zoom_height(reg, height_m):
+    """The height at which the frames' zoom ratios are read, and its focal-length series:
+    ``height_m`` when the series there is regular (members in 95 % of the frames with lanes or
+    more, frame-to-frame jumps in at most :data:`ZOOM_JUMP_SHARE` of the pairs), else the
+    regular height of :data:`ZOOM_SCAN_HEIGHTS_M` nearest to it (in log), else the height with
+    the most members, then the fewest jumps, then the smoothest series.
+
+    The family of a wide view's bent (still distorted) lines can end below a plausible height
+    (no member there) or fold over near it (members of 600 and 6000 px in neighbouring frames,
+    measured on a 29 deg view with ``k1 = 0.24``); ratios read there are noise, and a frame given
+    a ratio of 0.1 is undistorted by a hundred times the clip's lens, which ruins the evidence.
+    The ratios between frames hardly depend on the height wherever the series is regular and
+    the height plausible (far below it a family's members have fields of view of 100 deg and
+    more, and other ratios)."""
+    n_ok = max(sum(fl.ok for fl in reg.frame_lanes), 1) / max(len(reg.frame_lanes), 1)
+
+    def regular(q):
+        return q[0] >= 0.95 * n_ok and q[1] <= ZOOM_JUMP_SHARE
+
+    f = _focal_series(reg, height_m)
+    if regular(_series_quality(f)):
+        return float(height_m), f
+    scan = [(h, _focal_series(reg, h)) for h in ZOOM_SCAN_HEIGHTS_M]
+    quality = [_series_quality(g) for _, g in scan]
+    good = [k for k, q in enumerate(quality) if regular(q)]
+    if good:
+        k = min(good, key=lambda k: abs(np.log(scan[k][0] / height_m)))
+        return float(scan[k][0]), scan[k][1]
+    # nothing regular: the most members (to the hundredth), then the fewest jumps, then the
+    # smoothest series, the given height first among equals
+    scan.insert(0, (float(height_m), f))
+    quality.insert(0, _series_quality(f))
+    k = max(range(len(scan)), key=lambda k: (round(quality[k][0], 2), -quality[k][1], -quality[k][2], k == 0))
+    return float(scan[k][0]), scan[k][1]
+
+
+def _zoom_ratios(reg, height_m):
+    """Each frame's focal length relative to the clip's median, from the families of the lines
+    at ``height_m`` or, where those are not regular there, at another height
+    (:func:`_zoom_height`; ratios between frames hardly depend on the height), smoothed over
+    time with a 25-frame running median; frames without a member get their neighbours' ratio.
+    Also returns the reference (median) focal length (of the height used)."""
+    F = len(reg.frame_lanes)
+    f = _zoom_height(reg, height_m)[1]
     if not np.isfinite(f).any():
         return np.ones(F), float("nan")
     # a broadcast zoom changes smoothly; single frames' families scatter by several per cent

@@ -424,7 +424,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
         n_frames = max(int(self.valid.sum()), 1)
         static_parts = {}
         # the clip's reference focal length (zoom ratios removed) at every grid height
-        self.f_ref_grid = np.full(G, np.nan)
+        self.f_ref_grid, self.speed_grid = np.full(G, np.nan), np.full(G, np.nan)  # and the athlete's speed
         zoom = self.lens.evidence.zoom if self.lens is not None else np.ones(self.F)
         pelvis = self.kp[:, JOINT_INDEX["pelvis"], :2]
         for g, h in enumerate(self.grid):
@@ -441,6 +441,8 @@ class ClipModel(DrawPropagation, EmceeSampling):
             # heights is dominated by unmodelled effects; undamped it would swamp every
             # other term by hundreds of nats
             n_meas = max(len(tr.contact_points_m), 1)
+            v = np.linalg.norm(tr.velocity_mps, axis=-1)  # no finite speed: NaN, no penalty
+            self.speed_grid[g] = np.median(v[np.isfinite(v)]) if np.isfinite(v).any() else np.nan
             self.ll_track[g] = tr.log_likelihood / n_meas if np.isfinite(tr.log_likelihood) else -1e3
             # static camera: one lateral position for all frames (residuals relative to the
             # camera-athlete distance, scored once every height is seen: probreg.inference.static)
@@ -569,12 +571,13 @@ class ClipModel(DrawPropagation, EmceeSampling):
 
     def _height_terms(self):
         """The terms that depend on the camera height alone (ground track, static camera,
-        planted feet), marginalised over the height's systematic allowance
+        planted feet, the running-speed prior), marginalised over the height's systematic allowance
         (:func:`probreg.inference.heights.smear_log_likelihood`): ``(log_grid, ll)``."""
         key = (self.track_weight, self._precompute_id)
         if getattr(self, "_height_cache", (None,))[0] != key:
             with np.errstate(invalid="ignore"):
                 ll = self.track_weight * self.ll_track + self.ll_static + self.ll_still + self.ll_limbs
+                ll = ll + self.priors.running_speed_logpdf(self.speed_grid)  # a height-only prior term
             self._height_cache = (key, smear_log_likelihood(self.grid, ll, self.height_systematic_sd))
         return self._height_cache[1]
 

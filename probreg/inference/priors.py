@@ -135,6 +135,23 @@ class ModelPriors:
     camera_height: Prior = field(default_factory=lambda: LogNormalPrior(9.0, 0.8))
     stature: Prior = field(default_factory=lambda: NormalPrior(1.80, 0.16))
     proportion_sd: float = 0.04
+    #: the running speed's prior: flat up to ``max_speed_mps``, a half-normal wall beyond
+    #: (:meth:`running_speed_logpdf`)
+    max_speed_mps: float = 12.5
+    speed_wall_sd_mps: float = 0.5
+
+    def running_speed_logpdf(self, speed_mps):
+        """Log-density (up to a constant) of the athlete's running speed (m/s): flat up to
+        :attr:`max_speed_mps`, 12.5 m/s (the fastest measured sprint speeds are about 12.4 m/s),
+        then falling as a half-normal of sd :attr:`speed_wall_sd_mps` (a few per cent of the
+        speed: what a clip's ground track measures it to).  A camera height that makes the athlete
+        run faster puts them at the wrong scale.  NaN (no track) is not penalised.
+
+        >>> ModelPriors().running_speed_logpdf(np.array([8.0, 13.0, 14.5, np.nan])).tolist()
+        [-0.0, -0.5, -8.0, -0.0]
+        """
+        over = np.maximum(np.nan_to_num(np.asarray(speed_mps, float), nan=0.0) - self.max_speed_mps, 0.0)
+        return -0.5 * (over / self.speed_wall_sd_mps) ** 2
 
     @classmethod
     def from_options(cls, height=None, height_sd=None, stature=None, stature_sd=None):

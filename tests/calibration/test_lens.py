@@ -210,3 +210,59 @@ def test_lens_none_is_recorded_and_the_keypoint_share_follows_the_detector_noise
     with pytest.raises(ValueError, match="lens must be"):
         run_clip(noisy_wide_lens_clip, tmp_path / "bad", RunOptions(sampler=fast, report=False, lens="guess"),
                  log=lambda *a: None)
+
+
+class _FakeFamilies:
+    """Registration stand-in for the zoom ratios: ``focal(h, i)`` is frame ``i``'s member at
+    height ``h`` (None: no member there)."""
+
+    def __init__(self, focal, n=30):
+        from types import SimpleNamespace
+
+        self.frame_lanes = [SimpleNamespace(ok=True) for _ in range(n)]
+        self.sequence = SimpleNamespace(members_at_height=lambda h: [
+            None if focal(h, i) is None else SimpleNamespace(focal_px=focal(h, i)) for i in range(n)])
+
+
+def test_zoom_ratios_are_read_at_a_regular_height():
+    from probreg.calibration.lens import _zoom_height, _zoom_ratios
+
+    zoom = 1 + 0.03 * np.linspace(-1, 1, 30)  # the true zoom: a steady 6 % zoom-in (the running median keeps it)
+
+    def ends(h, i):  # the family ends at 8 m: no member at the prior's centre of 9 m
+        return 400.0 * h * zoom[i] if h < 8.0 else None
+
+    def folds(h, i):  # near 9 m neighbouring frames take members either side of a fold
+        return (6000.0 if i % 7 == 0 else 600.0) * zoom[i] if 8.5 < h < 9.5 else 70.0 * h * zoom[i]
+
+    for focal, (lo, hi) in ((ends, (7.0, 8.0)), (folds, (9.5, 11.0))):
+        h, f = _zoom_height(_FakeFamilies(focal), 9.0)
+        assert lo < h < hi  # the regular scanned height nearest to 9 m (in log: 7.97 and 10.04 m)
+        ratios, ref = _zoom_ratios(_FakeFamilies(focal), 9.0)
+        assert np.allclose(ratios, zoom / np.median(zoom), atol=0.01) and np.isfinite(ref)
+    # a regular series at the centre height is used as it is
+    h, f = _zoom_height(_FakeFamilies(lambda h, i: 300.0 * h * zoom[i]), 9.0)
+    assert h == 9.0 and np.allclose(f, 2700.0 * zoom)
+
+
+def test_a_wide_view_whose_family_folds_at_the_prior_centre_gives_back_its_lens(tmp_path):
+    # wide_lens seed 704 (29 deg, k1 = +0.24): at the camera-height prior's centre (9 m) the
+    # distorted lines' families fold over (neighbouring frames' members 600 and 6000 px apart);
+    # ratios read there undistorted some frames by ~100x the lens and the lines' best kappa came
+    # out at a quarter of the truth (0.0056 for 0.0192)
+    from probreg.calibration import lens as L
+    from probreg.calibration.registration import register_clip
+    from probreg.io.clip import load_clip
+    from probreg.sim import config_from_preset, synthesize, write_clip
+
+    synth = synthesize(config_from_preset("wide_lens", 704, n_frames=25), seed=704, preset="wide_lens")
+    write_clip(synth, tmp_path / "c", images=True, jobs=1)
+    clip = load_clip(tmp_path / "c", min_score=0.3)
+    reg = register_clip(clip)
+    reg.orient(9.0, clip.keypoints_px, "narrow", fps=clip.fps)
+    assert L._series_quality(L._focal_series(reg, 9.0))[1] > 0.05  # the fold is there
+    f_true = np.array([c.focal_px for c in synth.cameras])
+    truth = synth.cameras[0].dist[0] * (L.reference_radius(clip.image_size) / np.median(f_true)) ** 2
+    lens, _ = L.lens_registration(reg, height_m=9.0)
+    assert lens.kappa_star == pytest.approx(truth, rel=0.05)
+    assert np.allclose(lens.evidence.zoom, f_true / np.median(f_true), atol=0.03)

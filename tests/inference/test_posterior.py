@@ -474,6 +474,7 @@ def test_limb_term_does_not_tilt_towards_low_cameras():
     m.ll_track, m.ll_static, m.ll_still, m.ll_limbs = np.zeros(G), np.zeros(G), np.zeros(G), np.zeros(G)
     m.track_weight, m.lens = 0.2, None
     m.height_systematic_sd, m._precompute_id = 0.015, 1
+    m.priors, m.speed_grid = ModelPriors(), np.full(G, np.nan)  # no track: no speed, no penalty
     per_m = {"thigh": 0.045, "shank": 0.044, "upper_arm": 0.033, "forearm": 0.026, "trunk": 0.05}
     m.seg_obs = {s: per_m[s] * m.grid for s in OBSERVED_SEGMENTS}
     m.seg_se = {s: 0.03 * m.seg_obs[s] for s in OBSERVED_SEGMENTS}
@@ -499,6 +500,7 @@ def test_a_height_spike_is_widened_to_the_systematic_allowance():
     m.ll_track, m.ll_still, m.ll_limbs = np.zeros(G), np.zeros(G), np.zeros(G)
     m.ll_static = -0.5 * (np.log(m.grid / 20.0) / 0.001) ** 2
     m.track_weight, m.lens, m._precompute_id = 0.2, None, 1
+    m.priors, m.speed_grid = ModelPriors(), np.full(G, np.nan)
     m.seg_obs = {s: np.full(G, np.nan) for s in OBSERVED_SEGMENTS}
     m.seg_se = dict(m.seg_obs)
     theta = np.array([np.r_[np.log(20.0 * f), 1.8, np.ones(7)] for f in (1.0, np.exp(0.015), np.exp(-0.03))])
@@ -534,3 +536,31 @@ def test_limbs_keep_their_length_only_under_the_true_camera(distorted_lanes):
     assert at(0.85 * h_true) > 1.5 * at(h_true)
     best = m.grid[int(np.argmax(m.ll_limbs))]
     assert abs(best / h_true - 1) < 0.03
+
+
+def test_running_speed_prior_is_flat_for_human_speeds_and_walls_off_the_rest(model):
+    """The model's ground track at each grid height gives the athlete's speed; at the true height
+    it is the true speed, and the prior only penalises heights that make the athlete run faster
+    than a human can (above 12.5 m/s)."""
+    m, gt = model
+    v_true = gt.athlete["gait"]["speed_mps"]
+    h_true = float(gt.cameras[0].C[2])
+    ok = np.isfinite(m.speed_grid)
+    assert ok.sum() > 10
+    v_at_truth = np.interp(np.log(h_true), np.log(m.grid[ok]), m.speed_grid[ok])
+    assert abs(v_at_truth - v_true) / v_true < 0.1
+    term = m.priors.running_speed_logpdf(m.speed_grid)
+    assert np.all(term[ok & (m.speed_grid <= 12.5)] == 0.0)
+    assert np.all(term[m.speed_grid > 13.5] < -2.0)
+    # the term is part of the height likelihood: a wall below the true speed moves the best height
+    x, ll = m._height_terms()
+    slow = replace(m.priors, max_speed_mps=0.5 * v_true)
+    m_priors, m.priors = m.priors, slow
+    try:
+        m._height_cache = (None,)
+        x2, ll2 = m._height_terms()
+    finally:
+        m.priors, m._height_cache = m_priors, (None,)
+    best, best_slow = x[np.nanargmax(ll)], x2[np.nanargmax(ll2)]
+    v_best_slow = np.interp(best_slow, np.log(m.grid[ok]), m.speed_grid[ok])
+    assert best_slow != best and v_best_slow < 0.75 * v_true
