@@ -494,8 +494,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                                      "frame_status": status, "keypoint_status": detection_status(model.raw, model.kp),
                                      "noise_px": model.noise_sd,
                                      "noise_rho": model.noise_rho, "n_draws": len(draws),
-                                     "priors": {"camera_height": repr(options.priors.camera_height),
-                                                "stature": repr(options.priors.stature)}})
+                                     "priors": options.priors.describe()})
         if report is not None:
             report()  # a failure in the process renders the report again here, and raises as itself
     log(f"height {height['median']:.2f} m [{height['lo']:.2f}, {height['hi']:.2f}]; "

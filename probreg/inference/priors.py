@@ -153,6 +153,16 @@ class ModelPriors:
         over = np.maximum(np.nan_to_num(np.asarray(speed_mps, float), nan=0.0) - self.max_speed_mps, 0.0)
         return -0.5 * (over / self.speed_wall_sd_mps) ** 2
 
+    def describe(self):
+        """The priors as ``run.json`` records them.
+
+        >>> ModelPriors().describe()["running_speed"]
+        'flat up to 12.5 m/s, half-normal of sd 0.5 m/s beyond'
+        """
+        return {"camera_height": repr(self.camera_height), "stature": repr(self.stature),
+                "running_speed": f"flat up to {self.max_speed_mps:g} m/s, half-normal of sd "
+                                 f"{self.speed_wall_sd_mps:g} m/s beyond"}
+
     @classmethod
     def from_options(cls, height=None, height_sd=None, stature=None, stature_sd=None):
         """Defaults with user overrides.

@@ -165,6 +165,9 @@ def test_run_pipeline_writes_the_result_layout(small_clip, tmp_path):
     assert npz["samples"].shape[0] == FAST.n_draws and npz["median"].shape == (40, 17, 3)
     cam = json.loads((out / "camera.json").read_text())
     assert cam["height_m"]["lo"] <= cam["height_m"]["median"] <= cam["height_m"]["hi"]
+    priors = json.loads((out / "run.json").read_text())["priors"]
+    assert set(priors) == {"camera_height", "stature", "running_speed"}
+    assert priors["running_speed"] == "flat up to 12.5 m/s, half-normal of sd 0.5 m/s beyond"
     import arviz as az
 
     idata = az.from_netcdf(str(out / "posterior.nc"))
