@@ -157,8 +157,8 @@ def read_keypoints_json(path, n_frames=None):
     Raises
     ------
     ClipFormatError
-        On malformed JSON, an unknown format, wrong joint counts, bad frame indices, or
-        scores outside [0, 1].
+        On malformed JSON, an unknown format, wrong joint counts, bad or repeated frame
+        indices, or scores outside [0, 1].
     """
     path = Path(path)
     doc = _read_json(path)
@@ -181,6 +181,12 @@ def read_keypoints_json(path, n_frames=None):
         if fi < 0:
             raise ClipFormatError(f"{path}: frames[{k}] has a negative frame index {fi}")
         idx.append(fi)
+    first = {}
+    for k, fi in enumerate(idx):
+        if fi in first:  # two detections for one frame: which one is the athlete is not ours to guess
+            raise ClipFormatError(f"{path}: frame {fi} is listed twice (frames[{first[fi]}] and frames[{k}]); "
+                                  f"give one entry per frame")
+        first[fi] = k
     total = n_frames if n_frames is not None else (max(idx) + 1 if idx else 0)
     if idx and max(idx) >= total:
         raise ClipFormatError(f"{path}: frame {max(idx)} beyond the clip's {total} frames")

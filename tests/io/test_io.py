@@ -53,6 +53,10 @@ def test_low_scores_become_missing(tmp_path):
     ({"format": "h36m17", "frames": [{"frame": 9, "keypoints": None}]}, "beyond"),
     ({"format": "h36m17", "frames": [{"keypoints": None}]}, "lacks 'frame'"),
     ({"format": "h36m17", "frames": [{"frame": 0, "keypoints": [["a", 2, 3]] * 17}]}, "not numbers"),
+    # two detections for one frame: an error, not the last one silently kept
+    ({"format": "h36m17", "frames": [{"frame": 1, "keypoints": None}, {"frame": 0, "keypoints": None},
+                                     {"frame": 1, "keypoints": [[1, 2, 0.9]] * 17}]},
+     r"frame 1 is listed twice \(frames\[0\] and frames\[2\]\)"),
 ])
 def test_malformed_keypoints_name_the_file(tmp_path, content, match):
     d = _clip(tmp_path, content)
