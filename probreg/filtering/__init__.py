@@ -14,7 +14,7 @@ from .basic import (
     leg_length_px,
     noise_model,
 )
-from .clean import clean_keypoints, detection_status, planted_ankles
+from .clean import clean_keypoints, detection_status
 from .pair import periodic_smooth_pair
 from .periodic import (
     periodic_smooth,
@@ -25,7 +25,7 @@ from .periodic import (
 )
 
 __all__ = [
-    "hampel", "fill_gaps", "butterworth", "clean_keypoints", "detection_status", "planted_ankles", "keypoint_noise_px", "noise_model",
+    "hampel", "fill_gaps", "butterworth", "clean_keypoints", "detection_status", "keypoint_noise_px", "noise_model",
     "keypoints_noisy", "leg_length_px", "NOISE_FLOOR_PX", "NOISE_FLOOR_LEG_FRAC",
     "periodic_smooth", "periodic_smooth_pair", "periodic_smooth_series", "score_noise_scale", "stride_lags",
     "stride_period_frames",

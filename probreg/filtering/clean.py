@@ -5,7 +5,6 @@ from __future__ import annotations
 
 import numpy as np
 
-from ..geometry import JOINT_INDEX
 from .basic import (
     NOISE_FLOOR_LEG_FRAC,
     NOISE_FLOOR_PX,
@@ -17,7 +16,7 @@ from .basic import (
 )
 from .periodic import periodic_smooth
 
-__all__ = ["clean_keypoints", "detection_status", "planted_ankles"]
+__all__ = ["clean_keypoints", "detection_status"]
 
 
 def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=3.0, max_gap=10,
@@ -100,39 +99,3 @@ def detection_status(raw_px, cleaned_px=None):
     names = np.array(["no_detection", "interpolated", "partial", "ok"], object)
     tests = np.column_stack([raw_none & gone.all(axis=1), raw_none, gone.any(axis=1), np.ones(F, bool)])
     return names[np.argmax(tests, axis=1)].tolist()
-
-
-def planted_ankles(raw, cleaned, k=4.0):
-    """Keypoints for the planted-feet term: the cleaned ones, with the ankles replaced by the
-    raw detections wherever those lie within ``k`` times their median distance from the cleaned
-    track (NaN elsewhere: outliers, left/right swaps, gaps the cleaning filled).
-
-    The cross-stride smoother of :func:`probreg.filtering.clean_keypoints` mixes the same phase
-    of neighbouring strides; where a contact is detected a frame or two early, the stance
-    window starts at the touchdown, and there the smoothed ankle still moves forward (re-noised
-    true joints, true cameras: +0.07 of the running speed on the suite's run_a, raw +0.02 within
-    noise; docs/method.md).  Raw detections carry zero-mean noise, which the term's scatter
-    estimate measures.  For a 2-D Gaussian residual, four times its median distance (4.7 sd)
-    leaves out 0.002 % of the inliers; the cleaned track's own error near gross errors makes
-    that more (three times dropped 6 % of good stance detections on a clip with 2 % outliers
-    and 2 % swaps, four times 1 %).
-
-    >>> raw = np.zeros((6, 17, 3)); raw[..., 2] = 1.0
-    >>> raw[:, 3, 0] = [0.0, 1.0, -1.0, 0.5, 40.0, 0.2]   # r_ankle: frame 4 an outlier
-    >>> kp = raw.copy(); kp[:, 3, 0] = 0.0
-    >>> out = planted_ankles(raw, kp)
-    >>> out[:, 3, 0].tolist()[:4], bool(np.isnan(out[4, 3, 0])), float(out[5, 3, 0])
-    ([0.0, 1.0, -1.0, 0.5], True, 0.2)
-    """
-    out = np.array(cleaned, float, copy=True)
-    raw = np.asarray(raw, float)
-    for name in ("l_ankle", "r_ankle"):
-        j = JOINT_INDEX[name]
-        r = np.linalg.norm(raw[:, j, :2] - out[:, j, :2], axis=-1)
-        ok = np.isfinite(r)
-        if not ok.any():
-            continue
-        med = float(np.median(r[ok]))
-        keep = ok & (r <= k * med) if med > 0 else ok
-        out[:, j, :2] = np.where(keep[:, None], raw[:, j, :2], np.nan)
-    return out

@@ -61,7 +61,7 @@ from ..calibration.registration import (
     glitch_vote,
     lane_anchor_shift,
 )
-from ..filtering import clean_keypoints, keypoints_noisy, noise_model, planted_ankles, stride_lags
+from ..filtering import clean_keypoints, keypoints_noisy, noise_model, stride_lags
 from ..geometry import JOINT_INDEX, SEGMENT_BONES
 from ..geometry.rays import CameraArrays, _as_list
 from ..lifting import LiftConfig
@@ -155,7 +155,6 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self.athlete_lane = athlete_lane
         self.raw = np.asarray(keypoints_px, float)
         self.kp = clean_keypoints(self.raw, self.fps)
-        self.kp_planted = planted_ankles(self.raw, self.kp)  # the planted-feet term's (_slides)
         self.noise_sd, self.noise_rho = noise_model(self.raw)
         self.F = len(self.kp)
         # stride timing for the cross-stride angle smoothing of every lifting (None: no
@@ -485,7 +484,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
         out = np.full(len(win), np.nan)
         if not win or tr.status != "ok":
             return out
-        x = sagittal_ankle_points(cams, self.kp_planted, tr)[..., 0]
+        x = sagittal_ankle_points(cams, self.kp, tr)[..., 0]
         with np.errstate(invalid="ignore"):
             v_run = float(np.nanmedian(tr.velocity_mps[:, 0]))
         if not np.isfinite(v_run) or abs(v_run) < 0.5:
@@ -506,6 +505,8 @@ class ClipModel(DrawPropagation, EmceeSampling):
         n_ok = np.isfinite(slides).sum(axis=1)
         if K < 4 or not rows.any():
             return  # too few whole contacts: no evidence
+        import warnings
+
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)
             # a height that sees fewer than half the contacts is not scored on the few it sees

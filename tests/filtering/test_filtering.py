@@ -298,36 +298,3 @@ def test_a_joint_without_any_stride_pair_is_still_smoothed(runner_views, monkeyp
     # still a smoothing of the data: closer to the truth than the noisy detections
     err = lambda x: np.sqrt(np.mean((x - truth[: F // 2, :, :2]) ** 2))  # noqa: E731
     assert err(seen) < err(noisy[: F // 2, :, :2])
-
-
-def test_planted_ankles_keep_raw_detections_and_drop_gross_errors():
-    """The planted-feet term's ankles: the raw detections (zero-mean noise, not averaged across
-    strides), without the outliers and left/right swaps the cleaned track exposes; every other
-    joint is the cleaned one."""
-    from dataclasses import replace
-
-    from probreg.filtering import planted_ankles
-    from probreg.geometry import JOINT_INDEX
-    from probreg.sim import config_from_preset, synthesize
-    from probreg.sim.synth import DetectorNoise
-
-    cfg = config_from_preset("run", 11, n_frames=250)
-    cfg = replace(cfg, noise=DetectorNoise(outlier_prob=0.02, swap_prob=0.02))
-    clip = synthesize(cfg, seed=11)
-    raw, truth = clip.keypoints_px, clip.joints2d_px
-    cleaned = clean_keypoints(raw, 50.0)
-    out = planted_ankles(raw, cleaned)
-    others = [j for j in range(17) if j not in (JOINT_INDEX["l_ankle"], JOINT_INDEX["r_ankle"])]
-    np.testing.assert_array_equal(out[:, others], cleaned[:, others])
-    sigma = float(np.nanmedian(DetectorNoise().sigma_px * clip.athlete_height_px / DetectorNoise().ref_height_px))
-    for name in ("l_ankle", "r_ankle"):
-        j = JOINT_INDEX[name]
-        err = np.linalg.norm(raw[:, j, :2] - truth[:, j, :2], axis=-1)
-        kept = np.isfinite(out[:, j, 0])
-        np.testing.assert_array_equal(out[kept, j, :2], raw[kept, j, :2])  # raw, untouched
-        gross = err > 12 * sigma  # outliers (5-25 sigma) and swapped legs
-        assert gross.sum() >= 3
-        assert not np.any(kept & gross)
-        inliers = np.isfinite(err) & (err < 3 * sigma)
-        stance = clip.motion.contacts[:, int(name == "r_ankle")]
-        assert kept[inliers].mean() > 0.98 and kept[inliers & stance].mean() > 0.98
