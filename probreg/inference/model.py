@@ -26,8 +26,7 @@ Likelihood (every term a function of the height; the limb terms also of the leng
   stands still on the track, but family members at a wrong height disagree
   on where a ground point is from frame to frame (the position along the
   track is free in each frame, and a panning camera sees it shift
-  differently at every height), so planted ankles seem to slide (measured on
-  the raw ankle detections, :func:`probreg.filtering.planted_ankles`).  The
+  differently at every height), so planted ankles seem to slide.  The
   median slide over the clip's contacts, as a fraction of the running speed,
   is scored with a Gaussian whose sd adds :data:`STILLNESS_SYS_SD` (the slide
   left at the true height: contact timing, keypoint noise, real ankle
