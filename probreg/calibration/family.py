@@ -553,6 +553,10 @@ class SequenceCalibration:
             cache[key] = (tuple(self.families), self._solve_members(height_m))
         return list(cache[key][1])
 
+    def focal_at_height(self, height_m):
+        """(F,) focal length (px) of every frame's member at ``height_m`` (NaN without one)."""
+        return np.array([np.nan if m is None else m.focal_px for m in self.members_at_height(float(height_m))])
+
     def _solve_members(self, height_m):
         """Every frame's member at ``height_m``: :meth:`HeightParameter.focal_for` per frame, with
         the refinement and the members at the roots evaluated for all frames at once (families

@@ -419,15 +419,6 @@ ZOOM_JUMP_LOG = 0.05
 ZOOM_JUMP_SHARE = 0.02
 
 
-def _focal_series(reg, height_m):
-    """Each frame's focal length of its family's member at ``height_m`` (NaN without one)."""
-    f = np.full(len(reg.frame_lanes), np.nan)
-    for i, m in enumerate(reg.sequence.members_at_height(height_m)):
-        if m is not None:
-            f[i] = m.focal_px
-    return f
-
-
 def _series_quality(f):
     """``(coverage, jumps, roughness)`` of a focal-length series: the share of frames with a
     member, the share of consecutive frame pairs whose focal length jumps by more than
@@ -465,10 +456,10 @@ def _zoom_height(reg, height_m):
     def regular(q):
         return q[0] >= 0.95 * n_ok and q[1] <= ZOOM_JUMP_SHARE
 
-    f = _focal_series(reg, height_m)
+    f = reg.sequence.focal_at_height(height_m)
     if regular(_series_quality(f)):
         return float(height_m), f
-    scan = [(h, _focal_series(reg, h)) for h in ZOOM_SCAN_HEIGHTS_M]
+    scan = [(h, reg.sequence.focal_at_height(h)) for h in ZOOM_SCAN_HEIGHTS_M]
     quality = [_series_quality(g) for _, g in scan]
     good = [k for k, q in enumerate(quality) if regular(q)]
     if good:

@@ -180,11 +180,8 @@ class ClipRegistration:
         if getattr(self, "_glitches", None) is not None:
             return self._glitches
         seq = self.sequence
-
-        def focal_at(h):
-            return np.array([m.focal_px if m is not None else np.nan for m in seq.members_at_height(float(h))])
-
-        self._glitches = glitch_vote(focal_at, np.array([f is not None for f in seq.families]), heights, min_share)
+        self._glitches = glitch_vote(seq.focal_at_height, np.array([f is not None for f in seq.families]), heights,
+                                     min_share)
         return self._glitches
 
     def _offsets_pass(self, seq, members):

@@ -170,7 +170,7 @@ def read_keypoints_json(path, n_frames=None):
     frames = doc["frames"]
     if not isinstance(frames, list):
         raise ClipFormatError(f"{path}: 'frames' must be a list")
-    idx = []
+    idx, first = [], {}
     for k, entry in enumerate(frames):
         if not isinstance(entry, dict) or "frame" not in entry:
             raise ClipFormatError(f"{path}: frames[{k}] lacks 'frame'")
@@ -180,13 +180,11 @@ def read_keypoints_json(path, n_frames=None):
             raise ClipFormatError(f"{path}: frames[{k}] has a non-integer frame index") from None
         if fi < 0:
             raise ClipFormatError(f"{path}: frames[{k}] has a negative frame index {fi}")
-        idx.append(fi)
-    first = {}
-    for k, fi in enumerate(idx):
         if fi in first:  # two detections for one frame: which one is the athlete is not ours to guess
             raise ClipFormatError(f"{path}: frame {fi} is listed twice (frames[{first[fi]}] and frames[{k}]); "
                                   f"give one entry per frame")
         first[fi] = k
+        idx.append(fi)
     total = n_frames if n_frames is not None else (max(idx) + 1 if idx else 0)
     if idx and max(idx) >= total:
         raise ClipFormatError(f"{path}: frame {max(idx)} beyond the clip's {total} frames")

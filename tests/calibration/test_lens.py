@@ -219,9 +219,16 @@ class _FakeFamilies:
     def __init__(self, focal, n=30):
         from types import SimpleNamespace
 
+        from probreg.calibration.family import SequenceCalibration
+
+        class Sequence:
+            focal_at_height = SequenceCalibration.focal_at_height  # the real one, on the fake members
+
+            def members_at_height(self, h):
+                return [None if focal(h, i) is None else SimpleNamespace(focal_px=focal(h, i)) for i in range(n)]
+
         self.frame_lanes = [SimpleNamespace(ok=True) for _ in range(n)]
-        self.sequence = SimpleNamespace(members_at_height=lambda h: [
-            None if focal(h, i) is None else SimpleNamespace(focal_px=focal(h, i)) for i in range(n)])
+        self.sequence = Sequence()
 
 
 def test_zoom_ratios_are_read_at_a_regular_height():
@@ -260,7 +267,7 @@ def test_a_wide_view_whose_family_folds_at_the_prior_centre_gives_back_its_lens(
     clip = load_clip(tmp_path / "c", min_score=0.3)
     reg = register_clip(clip)
     reg.orient(9.0, clip.keypoints_px, "narrow", fps=clip.fps)
-    assert L._series_quality(L._focal_series(reg, 9.0))[1] > 0.05  # the fold is there
+    assert L._series_quality(reg.sequence.focal_at_height(9.0))[1] > 0.05  # the fold is there
     f_true = np.array([c.focal_px for c in synth.cameras])
     truth = synth.cameras[0].dist[0] * (L.reference_radius(clip.image_size) / np.median(f_true)) ** 2
     lens, _ = L.lens_registration(reg, height_m=9.0)

@@ -130,8 +130,11 @@ def test_glitch_frames_are_off_the_zoom_path_at_every_height(small_clip):
     reg = register_clip(load_clip(small_clip))
     F = 60
 
+    from probreg.calibration.family import SequenceCalibration
+
     class FakeSequence:
         families = [object()] * F
+        focal_at_height = SequenceCalibration.focal_at_height  # the real one, on the fake members
 
         def members_at_height(self, h):
             f = 2000.0 * (h / 10.0) * np.exp(0.002 * np.arange(F))  # a smooth zoom
