@@ -25,6 +25,7 @@ lay far outside the image, their count per frame (``keypoints_outside_image``).
 from __future__ import annotations
 
 import time
+import warnings
 from dataclasses import dataclass, field, replace
 from pathlib import Path
 
@@ -42,7 +43,7 @@ from .inference.heights import HEIGHT_SYSTEMATIC_SD
 from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationError
 from .inference.sampling import SamplerSettings
 from .inference.evidence import BRANCHES, BranchChoice, laplace_log_evidence
-from .inference.verdict import bone_length_cv, clip_verdict
+from .inference.verdict import bone_length_cv, clip_verdict, knee_band_width
 from .inference.parallel import default_workers, fork_call
 from .io.clip import FPS_RANGE, ClipFormatError, load_clip, write_json
 from .io.frames import has_frames
@@ -107,9 +108,11 @@ class RunResult:
     branch: object = None
 
 
-def _arviz():
-    import warnings
+#: report figures drawn in a forked process while the files are written (html.run_figures)
+REPORT_FIGURES_ELSEWHERE = ("sampler", "angles", "gait_cycle", "decomposition")
 
+
+def _arviz():
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", FutureWarning)  # ArviZ announces its 1.0 refactor on import
         import arviz as az
@@ -424,8 +427,6 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     height = static_interval(np.exp(flat[:, 0]))  # calibrated 90 % interval (and the model's own)
     athlete = {f"{k}_m": static_interval(v) for k, v in {"stature": flat[:, 1], **model.lengths(flat)}.items()}
     lens_doc = _lens_summary(options, lens, flat)
-    import warnings
-
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         summ = angle_bands(prop["angles_point"], prop["angles"], fps=clip.fps, inflation=options.band_inflation)
@@ -455,19 +456,20 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         log_height_prior_sd=getattr(prior_h, "log_sd", None), side=side, bone_cv_pct=bone_length_cv(joints_med),
         speed_mps=gait_s.get("speed_mps", {}).get("median"),
         stature_draws=flat[:, 1], stature_prior=options.priors.stature, branch=branch,
-        member_sensitivity=sensitivity, lanes_agree=agree, noise_rho=model.noise_rho)
+        member_sensitivity=sensitivity, lanes_agree=agree, noise_rho=model.noise_rho,
+        knee_band_deg=knee_band_width(summ))
     result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
                        gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
                        verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,
                        frame_status=status, lens=lens_doc, band_decomposition=decomposition,
                        branch=branch, athlete=athlete)
     with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=inputs, log=log) as tmp:
-        report = None
+        figures = None
         if options.report:
-            from .report.html import run_report
+            from .report.html import render_figures, run_report
 
-            # the report (its figures: ~4 s) renders on the other core while the files are written
-            report = fork_call(lambda: run_report(tmp / "report.html", clip, result, joints_med, cam_list))
+            # most figures (~1.2 s) render on the other core while the files are written here
+            figures = fork_call(lambda: render_figures(clip, result, REPORT_FIGURES_ELSEWHERE))
         _copy_extra(tmp, extra_files)
         write_angles_csv(tmp / "angles.csv", clip.fps, {k: v[0] for k, v in summ.items()},
                          {k: v[1] for k, v in summ.items()}, {k: v[2] for k, v in summ.items()})
@@ -495,13 +497,12 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                                      "noise_px": model.noise_sd,
                                      "noise_rho": model.noise_rho, "n_draws": len(draws),
                                      "priors": options.priors.describe()})
-        if report is not None:
-            report()  # a failure in the process renders the report again here, and raises as itself
+        if figures is not None:
+            # a failure in the process draws the figures again here, and raises as itself
+            run_report(tmp / "report.html", clip, result, joints_med, cam_list, rendered=figures())
     log(f"height {height['median']:.2f} m [{height['lo']:.2f}, {height['hi']:.2f}]; "
         f"{diag['steps']} steps (tau max {max(diag['tau'].values()):.0f}); total {timings['total_s']:.1f} s")
     return result
-
-
 
 
 #: file endings ``probreg run`` takes for a video (anything OpenCV's FFmpeg backend decodes works)

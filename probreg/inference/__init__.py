@@ -26,10 +26,10 @@ from .model import (
 )
 from .sampling import MOVES, SamplerSettings
 from .priors import SEGMENT_PROPORTIONS, LogNormalPrior, ModelPriors, NormalPrior, Prior
-from .verdict import VerdictThresholds, bone_length_cv, clip_verdict, posterior_modes
+from .verdict import VerdictThresholds, bone_length_cv, clip_verdict, knee_band_width, posterior_modes
 
 __all__ = [
-    "VerdictThresholds", "clip_verdict", "bone_length_cv", "posterior_modes",
+    "VerdictThresholds", "clip_verdict", "bone_length_cv", "knee_band_width", "posterior_modes",
     "Prior", "NormalPrior", "LogNormalPrior", "ModelPriors", "SEGMENT_PROPORTIONS", "angle_bands",
     "STANCE_WINDOW", "stance_window", "BAND_SCALE", "angle_curvature", "gait_intervals",
     "GAIT_BAND_SCALE", "NONNEGATIVE_GAIT_SUFFIXES", "ClipModel", "SamplerSettings", "MOVES", "PARAM_NAMES",

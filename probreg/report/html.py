@@ -13,7 +13,7 @@ import numpy as np
 from ..geometry import BONES, JOINT_INDEX, joint_angles
 from ..io.frames import read_frame
 
-__all__ = ["HtmlReport", "draw_skeleton", "clip_report", "run_report", "uncalibrated_report", "gait_cycle_figure",
+__all__ = ["HtmlReport", "draw_skeleton", "clip_report", "run_report", "run_figures", "render_figures", "figure_png", "uncalibrated_report", "gait_cycle_figure",
            "prior_posterior_figure", "status_strip_figure", "sampler_figure",
            "rank_histograms"]
 
@@ -32,6 +32,17 @@ def _subplots(nrows=1, ncols=1, **kw):
 
     fig = Figure(figsize=kw.pop("figsize", None))
     return fig, fig.subplots(nrows, ncols, **kw)
+
+
+def figure_png(fig):
+    """A matplotlib figure as PNG bytes, as reports embed it (a pyplot figure is closed)."""
+    buf = io.BytesIO()
+    fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
+    if fig.canvas.manager is not None:  # made by pyplot: release it
+        import matplotlib.pyplot as plt
+
+        plt.close(fig)
+    return buf.getvalue()
 
 
 class HtmlReport:
@@ -62,14 +73,9 @@ class HtmlReport:
         self.parts.append(f"<table><tr>{head}</tr>{body}</table>")
 
     def figure(self, fig, caption=""):
-        """Embed a matplotlib figure (a pyplot figure is closed afterwards)."""
-        buf = io.BytesIO()
-        fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
-        if fig.canvas.manager is not None:  # made by pyplot: release it
-            import matplotlib.pyplot as plt
-
-            plt.close(fig)
-        self._png(buf.getvalue(), caption)
+        """Embed a matplotlib figure (a pyplot figure is closed afterwards), or the PNG bytes
+        :func:`figure_png` made of one."""
+        self._png(fig if isinstance(fig, bytes) else figure_png(fig), caption)
 
     def image(self, img_bgr, caption="", max_width=960):
         """Embed an OpenCV image (BGR), downscaled to ``max_width``."""
@@ -192,9 +198,55 @@ def scale_note(stature_prior, stature_draws, interval=None):
     return text
 
 
-def run_report(out_html, clip, result, joints_median, cameras):
-    """Report of a pipeline run: posterior of the calibration and the athlete, angle bands, gait."""
+def _angles_figure(clip, result):
+    t = np.arange(clip.n_frames) / clip.fps
+    fig, axes = _subplots(3, 1, figsize=(10, 9), sharex=True)
+    for ax, names in zip(axes, (("knee_l", "knee_r"), ("hip_l", "hip_r"), ("elbow_l", "elbow_r"))):
+        for name, col in zip(names, ("tab:blue", "tab:orange")):
+            med, lo, hi = result.angle_summary[name]
+            ax.fill_between(t, lo, hi, color=col, alpha=0.25, lw=0)
+            ax.plot(t, med, color=col, label=f"{name} (median, 90 % band)")
+        ax.set_ylabel("deg")
+        ax.legend(loc="upper right", fontsize=8)
+    axes[-1].set_xlabel("time (s)")
+    return fig
+
+
+def run_figures(clip, result):
+    """The figures of :func:`run_report`, each as a function that draws it: {key: function}
+    (only those the run has), so that some can be rendered in another process
+    (:func:`render_figures`) while the rest of the report is made."""
+    figs = {"prior_posterior": lambda: prior_posterior_figure(result.model.priors, result.posterior.posterior)}
+    if getattr(result, "frame_status", None):
+        figs["status"] = lambda: status_strip_figure(result.frame_status, clip.fps)
+    figs["sampler"] = lambda: sampler_figure(result.posterior)
+    figs["angles"] = lambda: _angles_figure(clip, result)
+    if getattr(result, "gait_cycle", None):
+        figs["gait_cycle"] = lambda: gait_cycle_figure(result.gait_cycle)
+    if getattr(result, "band_decomposition", None):
+        figs["decomposition"] = lambda: decomposition_figure(result.band_decomposition)
+    return figs
+
+
+def render_figures(clip, result, keys):
+    """PNG bytes of the figures ``keys`` of :func:`run_figures` (those the run has): {key: bytes},
+    to pass to :func:`run_report` as ``rendered``."""
+    figs = run_figures(clip, result)
+    return {k: figure_png(figs[k]()) for k in keys if k in figs}
+
+
+def run_report(out_html, clip, result, joints_median, cameras, rendered=None):
+    """Report of a pipeline run: posterior of the calibration and the athlete, angle bands, gait.
+
+    ``rendered`` ({key: PNG bytes}, :func:`render_figures`) holds figures drawn elsewhere; the
+    others are drawn here.  The page is the same either way."""
     from ..analysis import GAIT_FIELDS
+
+    figs = run_figures(clip, result)
+    rendered = dict(rendered or {})
+
+    def fig(key):
+        return rendered[key] if key in rendered else figs[key]()
 
     rep = HtmlReport(f"probreg: {Path(str(clip.path)).name}")
     if result.verdict != "ok":
@@ -224,36 +276,25 @@ def run_report(out_html, clip, result, joints_median, cameras):
     st = result.athlete["stature_m"]
     rep.paragraph(scale_note(result.model.priors.stature, post["stature"].values.ravel(), (st["lo"], st["hi"])),
                   cls="note")
-    rep.figure(prior_posterior_figure(result.model.priors, post), "Prior (grey) and posterior (blue) of the "
+    rep.figure(fig("prior_posterior"), "Prior (grey) and posterior (blue) of the "
                "athlete's stature and the camera height: where the posterior is as wide as the prior, the clip "
                "did not measure the quantity")
-    if getattr(result, "frame_status", None):
-        rep.figure(status_strip_figure(result.frame_status, clip.fps), "Per-frame status (run.json frame_status)")
-    rep.figure(sampler_figure(result.posterior), "Sampler diagnostics: trace and rank plots of the log camera "
+    if "status" in figs:
+        rep.figure(fig("status"), "Per-frame status (run.json frame_status)")
+    rep.figure(fig("sampler"), "Sampler diagnostics: trace and rank plots of the log camera "
                "height and the stature, one line (one row of bars) per walker; flat rank histograms (bars up to the "
                "dashed line) mean the walkers mixed. R-hat and ESS below are ArviZ's.")
     rep.paragraph(f"emcee: {d['walkers']} walkers x {d['steps']} steps, acceptance "
                   f"{d['acceptance_fraction']:.2f}, max integrated autocorrelation time "
                   f"{max(d['tau'].values()):.0f} steps ({d['steps_per_tau']:.0f} tau), ESS(height) "
                   f"{d['ess_height']:.0f}, R-hat(height) {d['rhat_height']:.3f}.", cls="note")
-    t = np.arange(clip.n_frames) / clip.fps
-    fig, axes = _subplots(3, 1, figsize=(10, 9), sharex=True)
-    for ax, names in zip(axes, (("knee_l", "knee_r"), ("hip_l", "hip_r"), ("elbow_l", "elbow_r"))):
-        for name, col in zip(names, ("tab:blue", "tab:orange")):
-            med, lo, hi = result.angle_summary[name]
-            ax.fill_between(t, lo, hi, color=col, alpha=0.25, lw=0)
-            ax.plot(t, med, color=col, label=f"{name} (median, 90 % band)")
-        ax.set_ylabel("deg")
-        ax.legend(loc="upper right", fontsize=8)
-    axes[-1].set_xlabel("time (s)")
-    rep.figure(fig, "Joint angles with 90 % credible bands (calibration, limb lengths and detector noise)")
-    if getattr(result, "gait_cycle", None):
-        rep.figure(gait_cycle_figure(result.gait_cycle),
+    rep.figure(fig("angles"), "Joint angles with 90 % credible bands (calibration, limb lengths and detector noise)")
+    if "gait_cycle" in figs:
+        rep.figure(fig("gait_cycle"),
                    "Joint angles over the gait cycle (touchdown to touchdown of the same foot, 0-100 %; mean over "
                    "the clip's cycles), posterior median with its 90 % credible band over draws (gait_cycle.csv)")
-    dec = getattr(result, "band_decomposition", None)
-    if dec:
-        rep.figure(decomposition_figure(dec), "Where the bands come from: share of each angle's band variance due "
+    if "decomposition" in figs:
+        rep.figure(fig("decomposition"), "Where the bands come from: share of each angle's band variance due "
                    "to the lens (k1), the camera (height), the limbs (bone lengths) and the keypoints (2D detector "
                    "noise); run.json band_decomposition, method in band_decomposition_method")
     lens = getattr(result, "lens", None)

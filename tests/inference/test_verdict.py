@@ -174,3 +174,18 @@ def test_keypoint_noise_at_the_noise_models_bound_is_unreliable():
     verdict, reasons = clip_verdict(**GOOD, noise_rho=rho)
     assert verdict == "unreliable"
     assert reasons == ["keypoint noise unidentified (frame-to-frame correlation 0.90, the bound of the noise model)"]
+
+
+@pytest.mark.parametrize("sd, flagged", [(4.0, False), (14.0, True)])
+def test_knee_bands_too_wide_to_measure_the_knee_are_unreliable(sd, flagged):
+    from probreg.inference import angle_bands, knee_band_width
+
+    # 400 draws per frame of knees spread by ``sd``: the raw bootstrap band is 2 x 1.645 sd wide
+    rng = np.random.default_rng(7)
+    point = {k: np.full((400, 50), 60.0) for k in ("knee_l", "knee_r", "hip_l")}
+    noisy = {k: 60.0 + rng.normal(0, sd if k != "hip_l" else 30.0, (400, 50)) for k in point}
+    width = knee_band_width(angle_bands(point, noisy, inflation=1.0))
+    assert abs(width - 2 * 1.645 * sd) < 0.1 * sd  # the hip's wide band does not count
+    verdict, reasons = clip_verdict(**GOOD, knee_band_deg=width)
+    assert (verdict == "unreliable") == flagged
+    assert reasons == ([f"knee band wide (mean 90 % band {width:.1f} deg)"] if flagged else [])
