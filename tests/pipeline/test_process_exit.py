@@ -1,0 +1,56 @@
+"""The ``probreg`` script ends its process at once after single-process commands
+(:func:`probreg.__main__.entry`): what it printed and wrote must be whole, its exit code kept."""
+
+import json
+import subprocess
+import sys
+
+import numpy as np
+
+from probreg.__main__ import FAST_EXIT_COMMANDS, _command
+
+
+def _probreg(*args, env=None):
+    import os
+
+    return subprocess.run([sys.executable, "-m", "probreg", *args], capture_output=True, text=True,
+                          env={**os.environ, **(env or {})})
+
+
+def test_commands_with_clusters_or_subprocesses_exit_normally():
+    assert _command(["--debug", "run", "clip", "--out", "x"]) == "run"
+    assert _command(["--version"]) is None
+    assert {"batch", "bench"}.isdisjoint(FAST_EXIT_COMMANDS)
+
+
+def test_a_fast_exit_keeps_the_output_whole_and_the_exit_code(tmp_path):
+    fast = _probreg("synth", "--preset", "run", "--seed", "3", "--frames", "40", "--no-images",
+                    "--out", str(tmp_path / "fast"))
+    normal = _probreg("synth", "--preset", "run", "--seed", "3", "--frames", "40", "--no-images",
+                      "--out", str(tmp_path / "normal"), env={"PROBREG_NORMAL_EXIT": "1"})
+    assert fast.returncode == normal.returncode == 0
+    # piped (block-buffered) output reaches the reader whole
+    assert fast.stdout.strip() and (fast.stdout.replace(str(tmp_path / "fast"), "OUT")
+                                    == normal.stdout.replace(str(tmp_path / "normal"), "OUT"))
+    for name in ("clip.json", "keypoints2d.json"):
+        assert (tmp_path / "fast" / name).read_bytes() == (tmp_path / "normal" / name).read_bytes()
+    assert len(json.loads((tmp_path / "fast" / "keypoints2d.json").read_text())["frames"]) == 40
+    assert np.array_equal(np.load(tmp_path / "fast" / "groundtruth" / "joints3d.npy"),
+                          np.load(tmp_path / "normal" / "groundtruth" / "joints3d.npy"))
+    # an error keeps its code and its message
+    bad = _probreg("run", str(tmp_path / "missing"), "--out", str(tmp_path / "out"))
+    assert bad.returncode == 2 and "clip folder not found" in bad.stderr
+
+
+def test_the_fast_exit_skips_the_teardown_and_the_normal_one_does_not(tmp_path):
+    import os
+
+    code = ("import atexit, sys\natexit.register(lambda: print('teardown ran'))\n"
+            "from probreg.__main__ import entry\n"
+            f"entry(['synth', '--preset', 'run', '--frames', '20', '--no-images', '--out', sys.argv[1]])\n")
+    for env, ran in (({}, False), ({"PROBREG_NORMAL_EXIT": "1"}, True)):
+        out = subprocess.run([sys.executable, "-c", code, str(tmp_path / str(ran))], capture_output=True,
+                             text=True, env={**os.environ, **env})
+        assert out.returncode == 0, out.stderr
+        assert ("teardown ran" in out.stdout) == ran
+        assert "wrote 20 frames" in out.stdout
