@@ -21,17 +21,21 @@ def entry(argv=None):
     Tearing the interpreter down after a run (freeing every module and array) costs ~0.4 s, a
     twelfth of a typical run; after the commands of :data:`FAST_EXIT_COMMANDS` the process
     flushes its output and ends at once (``os._exit``) when nothing else is still running (no
-    other thread, no child process).  ``batch`` and ``bench`` (Dask clusters, subprocesses)
+    other thread but daemons such as tqdm's monitor, no child process).  ``batch`` and ``bench`` (Dask clusters, subprocesses)
     always exit normally, and so does every command when ``PROBREG_NORMAL_EXIT`` is set.
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     code = main(argv)
     if (_command(argv) in FAST_EXIT_COMMANDS and not os.environ.get("PROBREG_NORMAL_EXIT")
-            and threading.active_count() == 1 and not _children()):
+            and not _running_threads() and not _children()):
         sys.stdout.flush()
         sys.stderr.flush()
         os._exit(code or 0)
     sys.exit(code)
+
+
+def _running_threads():
+    return [t for t in threading.enumerate() if t is not threading.main_thread() and not t.daemon]
 
 
 def _children():

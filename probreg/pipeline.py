@@ -108,8 +108,9 @@ class RunResult:
     branch: object = None
 
 
-#: report figures drawn in a forked process while the files are written (html.run_figures)
-REPORT_FIGURES_ELSEWHERE = ("sampler", "angles", "gait_cycle", "decomposition")
+#: report figures drawn in a forked process while the files are written (html.run_figures); the
+#: posterior's two (html.posterior_figures) are drawn in one while the bands are summarised
+REPORT_FIGURES_ELSEWHERE = ("angles", "gait_cycle", "decomposition")
 
 
 def _arviz():
@@ -423,6 +424,10 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     decomposition = model.band_decomposition(draws, prop, rng)
     idata = posterior_inference_data(sampler, keypoints_px=clip.keypoints_px, frame_lanes=reg.frame_lanes,
                                      names=model.param_names)
+    if options.report:
+        from .report.html import posterior_figures, render_figures, run_report
+
+        early = fork_call(lambda: posterior_figures(model.priors, idata))
     diag = _diagnostics(sampler, tau, idata, names=model.param_names)
     height = static_interval(np.exp(flat[:, 0]))  # calibrated 90 % interval (and the model's own)
     athlete = {f"{k}_m": static_interval(v) for k, v in {"stature": flat[:, 1], **model.lengths(flat)}.items()}
@@ -464,11 +469,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                        frame_status=status, lens=lens_doc, band_decomposition=decomposition,
                        branch=branch, athlete=athlete)
     with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=inputs, log=log) as tmp:
-        figures = None
-        if options.report:
-            from .report.html import render_figures, run_report
-
-            # most figures (~1.2 s) render on the other core while the files are written here
+        if options.report:  # most figures render on the other core while the files are written here
             figures = fork_call(lambda: render_figures(clip, result, REPORT_FIGURES_ELSEWHERE))
         _copy_extra(tmp, extra_files)
         write_angles_csv(tmp / "angles.csv", clip.fps, {k: v[0] for k, v in summ.items()},
@@ -497,9 +498,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                                      "noise_px": model.noise_sd,
                                      "noise_rho": model.noise_rho, "n_draws": len(draws),
                                      "priors": options.priors.describe()})
-        if figures is not None:
-            # a failure in the process draws the figures again here, and raises as itself
-            run_report(tmp / "report.html", clip, result, joints_med, cam_list, rendered=figures())
+        if options.report:  # a failure in a process draws its figures again here, and raises as itself
+            run_report(tmp / "report.html", clip, result, joints_med, cam_list, rendered={**early(), **figures()})
     log(f"height {height['median']:.2f} m [{height['lo']:.2f}, {height['hi']:.2f}]; "
         f"{diag['steps']} steps (tau max {max(diag['tau'].values()):.0f}); total {timings['total_s']:.1f} s")
     return result

@@ -13,7 +13,7 @@ import numpy as np
 from ..geometry import BONES, JOINT_INDEX, joint_angles
 from ..io.frames import read_frame
 
-__all__ = ["HtmlReport", "draw_skeleton", "clip_report", "run_report", "run_figures", "render_figures", "figure_png", "uncalibrated_report", "gait_cycle_figure",
+__all__ = ["HtmlReport", "draw_skeleton", "clip_report", "run_report", "run_figures", "render_figures", "posterior_figures", "figure_png", "uncalibrated_report", "gait_cycle_figure",
            "prior_posterior_figure", "status_strip_figure", "sampler_figure",
            "rank_histograms"]
 
@@ -226,6 +226,14 @@ def run_figures(clip, result):
     if getattr(result, "band_decomposition", None):
         figs["decomposition"] = lambda: decomposition_figure(result.band_decomposition)
     return figs
+
+
+def posterior_figures(priors, idata):
+    """PNG bytes of the two figures of :func:`run_report` that need only the posterior (ArviZ
+    ``InferenceData``) and the priors, ``{"prior_posterior", "sampler"}``: they can be drawn
+    before the rest of the run's result exists."""
+    return {"prior_posterior": figure_png(prior_posterior_figure(priors, idata.posterior)),
+            "sampler": figure_png(sampler_figure(idata))}
 
 
 def render_figures(clip, result, keys):

@@ -45,12 +45,15 @@ def test_a_fast_exit_keeps_the_output_whole_and_the_exit_code(tmp_path):
 def test_the_fast_exit_skips_the_teardown_and_the_normal_one_does_not(tmp_path):
     import os
 
-    code = ("import atexit, sys\natexit.register(lambda: print('teardown ran'))\n"
+    code = ("import atexit, sys, threading, time\natexit.register(lambda: print('teardown ran'))\n"
+            "daemon = sys.argv[2] == 'True'\n"
+            "threading.Thread(target=time.sleep, args=(4,), daemon=daemon).start()\n"
             "from probreg.__main__ import entry\n"
             f"entry(['synth', '--preset', 'run', '--frames', '20', '--no-images', '--out', sys.argv[1]])\n")
-    for env, ran in (({}, False), ({"PROBREG_NORMAL_EXIT": "1"}, True)):
-        out = subprocess.run([sys.executable, "-c", code, str(tmp_path / str(ran))], capture_output=True,
-                             text=True, env={**os.environ, **env})
+    # a daemon thread (e.g. tqdm's monitor) does not hold the exit up; a live non-daemon one does
+    for env, daemon, ran in (({}, True, False), ({"PROBREG_NORMAL_EXIT": "1"}, True, True), ({}, False, True)):
+        out = subprocess.run([sys.executable, "-c", code, str(tmp_path / f"{daemon}{ran}"), str(daemon)],
+                             capture_output=True, text=True, env={**os.environ, **env})
         assert out.returncode == 0, out.stderr
         assert ("teardown ran" in out.stdout) == ran
         assert "wrote 20 frames" in out.stdout
