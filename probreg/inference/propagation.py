@@ -12,6 +12,7 @@ from ..analysis import gait_summary
 from ..filtering import clean_keypoints, score_noise_scale
 from ..geometry import ANGLE_NAMES, JOINT_INDEX, CameraArrays
 from ..lifting import LiftConfig, fit_ground_track, lift
+from ..lifting.trajectory import camera_track_config
 from .parallel import default_workers, fork_map
 
 __all__ = ["DrawPropagation"]
@@ -201,9 +202,12 @@ class DrawPropagation:
                                  else self._noise_copy(np.random.default_rng(int(noise_seeds[k])), per_joint))
                 variants.append(("", copies[k]))
             res_s = {}
+            # the ground-track filter's contact noise as the likelihood has it for this camera
+            # (the keypoint noise cast onto the ground: large across the track in a grazing view)
+            tcfg = camera_track_config(cams, self.kp[:, JOINT_INDEX["pelvis"], :2], self.noise_sd)
             for suffix, kp in variants:
                 # the same contacts for every draw (detected once on the cleaned keypoints)
-                tr = fit_ground_track(cams, kp, self.fps, contacts=self.contacts)
+                tr = fit_ground_track(cams, kp, self.fps, contacts=self.contacts, config=tcfg)
                 res = lift(cams, kp, self.fps, segments_m=seg, track=tr, config=cfg, stride_lag=self.stride_lag)
                 a = res.angles_deg()
                 res_s["joints" + suffix] = res.joints_track_m.astype(np.float32)
@@ -213,7 +217,7 @@ class DrawPropagation:
                 else:
                     # the timing of the steps comes from the contacts: in the bootstrap they are
                     # detected anew on the re-noised keypoints, so cadence and contact times vary
-                    res_s["gait"] = dict(gait_summary(fit_ground_track(cams, kp, self.fps), a, self.fps))
+                    res_s["gait"] = dict(gait_summary(fit_ground_track(cams, kp, self.fps, config=tcfg), a, self.fps))
             if not with_noise:
                 res_s["joints"], res_s["angles"] = res_s["joints_point"], res_s["angles_point"]
                 res_s["gait"] = res_s["gait_point"]
