@@ -14,7 +14,7 @@ def _probreg(*args, env=None):
     import os
 
     return subprocess.run([sys.executable, "-m", "probreg", *args], capture_output=True, text=True,
-                          env={**os.environ, **(env or {})})
+                          env={**os.environ, **(env or {})}, check=False)
 
 
 def test_commands_with_clusters_or_subprocesses_exit_normally():
@@ -49,11 +49,11 @@ def test_the_fast_exit_skips_the_teardown_and_the_normal_one_does_not(tmp_path):
             "daemon = sys.argv[2] == 'True'\n"
             "threading.Thread(target=time.sleep, args=(4,), daemon=daemon).start()\n"
             "from probreg.__main__ import entry\n"
-            f"entry(['synth', '--preset', 'run', '--frames', '20', '--no-images', '--out', sys.argv[1]])\n")
+            "entry(['synth', '--preset', 'run', '--frames', '20', '--no-images', '--out', sys.argv[1]])\n")
     # a daemon thread (e.g. tqdm's monitor) does not hold the exit up; a live non-daemon one does
     for env, daemon, ran in (({}, True, False), ({"PROBREG_NORMAL_EXIT": "1"}, True, True), ({}, False, True)):
         out = subprocess.run([sys.executable, "-c", code, str(tmp_path / f"{daemon}{ran}"), str(daemon)],
-                             capture_output=True, text=True, env={**os.environ, **env})
+                             capture_output=True, text=True, env={**os.environ, **env}, check=False)
         assert out.returncode == 0, out.stderr
         assert ("teardown ran" in out.stdout) == ran
         assert "wrote 20 frames" in out.stdout
