@@ -21,8 +21,9 @@ def entry(argv=None):
     Tearing the interpreter down after a run (freeing every module and array) costs ~0.4 s, a
     twelfth of a typical run; after the commands of :data:`FAST_EXIT_COMMANDS` the process
     flushes its output and ends at once (``os._exit``) when nothing else is still running (no
-    other thread but daemons such as tqdm's monitor, no child process).  ``batch`` and ``bench`` (Dask clusters, subprocesses)
-    always exit normally, and so does every command when ``PROBREG_NORMAL_EXIT`` is set.
+    other thread but daemons such as tqdm's monitor, no child process).  ``batch`` and ``bench``
+    (Dask clusters, subprocesses) always exit normally, and so does every command when
+    ``PROBREG_NORMAL_EXIT`` is set.
     """
     argv = sys.argv[1:] if argv is None else list(argv)
     code = main(argv)

@@ -161,8 +161,9 @@ def knee_band_width(angle_summary):
     >>> knee_band_width({"knee_l": (f, f - 5, f + 5), "knee_r": (f, f - 10, f + 10), "hip_l": (f, f - 90, f + 90)})
     15.0
     """
-    w = np.concatenate([np.asarray(angle_summary[k][2], float) - np.asarray(angle_summary[k][1], float)
-                        for k in ("knee_l", "knee_r") if k in angle_summary] or [np.array([np.nan])])
+    parts = [np.ravel(np.asarray(angle_summary[k][2], float) - np.asarray(angle_summary[k][1], float))
+             for k in ("knee_l", "knee_r") if k in angle_summary]
+    w = np.concatenate(parts) if parts else np.array([])
     w = w[np.isfinite(w)]
     return float(np.mean(w)) if len(w) else float("nan")
 

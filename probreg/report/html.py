@@ -13,7 +13,8 @@ import numpy as np
 from ..geometry import BONES, JOINT_INDEX, joint_angles
 from ..io.frames import read_frame
 
-__all__ = ["HtmlReport", "draw_skeleton", "clip_report", "run_report", "run_figures", "render_figures", "posterior_figures", "figure_png", "uncalibrated_report", "gait_cycle_figure",
+__all__ = ["HtmlReport", "draw_skeleton", "clip_report", "run_report", "run_figures", "render_figures",
+           "posterior_figures", "figure_png", "uncalibrated_report", "gait_cycle_figure",
            "prior_posterior_figure", "status_strip_figure", "sampler_figure",
            "rank_histograms"]
 
@@ -216,10 +217,9 @@ def run_figures(clip, result):
     """The figures of :func:`run_report`, each as a function that draws it: {key: function}
     (only those the run has), so that some can be rendered in another process
     (:func:`render_figures`) while the rest of the report is made."""
-    figs = {"prior_posterior": lambda: prior_posterior_figure(result.model.priors, result.posterior.posterior)}
+    figs = _posterior_figure_makers(result.model.priors, result.posterior)
     if getattr(result, "frame_status", None):
         figs["status"] = lambda: status_strip_figure(result.frame_status, clip.fps)
-    figs["sampler"] = lambda: sampler_figure(result.posterior)
     figs["angles"] = lambda: _angles_figure(clip, result)
     if getattr(result, "gait_cycle", None):
         figs["gait_cycle"] = lambda: gait_cycle_figure(result.gait_cycle)
@@ -228,12 +228,16 @@ def run_figures(clip, result):
     return figs
 
 
+def _posterior_figure_makers(priors, idata):
+    return {"prior_posterior": lambda: prior_posterior_figure(priors, idata.posterior),
+            "sampler": lambda: sampler_figure(idata)}
+
+
 def posterior_figures(priors, idata):
     """PNG bytes of the two figures of :func:`run_report` that need only the posterior (ArviZ
     ``InferenceData``) and the priors, ``{"prior_posterior", "sampler"}``: they can be drawn
     before the rest of the run's result exists."""
-    return {"prior_posterior": figure_png(prior_posterior_figure(priors, idata.posterior)),
-            "sampler": figure_png(sampler_figure(idata))}
+    return {k: figure_png(make()) for k, make in _posterior_figure_makers(priors, idata).items()}
 
 
 def render_figures(clip, result, keys):
