@@ -37,8 +37,8 @@ from .calibration.registration import camera_json, register_clip
 from .calibration.side import requested_side
 from .filtering import detection_status
 from .geometry import JOINT_NAMES
-from .inference import (STATIC_INTERVAL_SCALE, ModelPriors, angle_bands, gait_cycle_bands, gait_intervals,
-                        static_interval)
+from .inference import (STATIC_INTERVAL_SCALE, ModelPriors, angle_bands, bootstrap_noise_ratio, gait_cycle_bands,
+                        gait_intervals, static_interval)
 from .inference.heights import HEIGHT_SYSTEMATIC_SD
 from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationError
 from .inference.sampling import SamplerSettings
@@ -434,12 +434,13 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     lens_doc = _lens_summary(options, lens, flat)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
-        summ = angle_bands(prop["angles_point"], prop["angles"], fps=clip.fps, inflation=options.band_inflation)
+        pa, pn = prop["angles_point"], prop["angles"]
+        ratio = bootstrap_noise_ratio(prop["angle_noise_point"], prop["angle_noise"])  # 1 without bootstrap noise
+        summ = angle_bands(pa, pn, clip.fps, inflation=options.band_inflation, noise_ratio=ratio)
         gait_s = {k: {"median": m, "lo": lo, "hi": hi, "unit": GAIT_FIELDS[k]} for k, (m, lo, hi) in
                   gait_intervals(prop["gait_point"], gait, inflation=options.band_inflation).items()}
         joints_med = np.nanmedian(prop["joints_point"], 0)
-        cycles = gait_cycle_bands(prop["angles_point"], prop["angles"], model.contacts,
-                                  inflation=options.band_inflation)
+        cycles = gait_cycle_bands(pa, pn, model.contacts, inflation=options.band_inflation, noise_ratio=ratio)
     cams_med = model.cameras_at(height["median"])
     from .geometry.rays import _as_list
 
@@ -496,7 +497,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                                      "band_decomposition_method": DECOMPOSITION_METHOD,
                                      "frame_status": status, "keypoint_status": detection_status(model.raw, model.kp),
                                      "noise_px": model.noise_sd,
-                                     "noise_rho": model.noise_rho, "n_draws": len(draws),
+                                     "noise_rho": model.noise_rho, "band_noise_ratio": ratio, "n_draws": len(draws),
                                      "priors": options.priors.describe()})
         if options.report:  # a failure in a process draws its figures again here, and raises as itself
             run_report(tmp / "report.html", clip, result, joints_med, cam_list, rendered={**early(), **figures()})

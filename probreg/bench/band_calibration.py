@@ -17,6 +17,7 @@ the suite (``bench posterior``) then tests them out of sample.
 
 from __future__ import annotations
 
+import json
 import tempfile
 from pathlib import Path
 
@@ -24,6 +25,7 @@ import numpy as np
 
 from ..geometry import joint_angles
 from ..inference import BAND_CURVATURE_S2, BAND_SCALE, GAIT_BAND_SCALE, angle_curvature
+from ..inference.bands import noise_ratio_factor
 from ..io.clip import load_clip, load_groundtruth
 from ..io.results import read_angles_csv
 from ..pipeline import RunOptions, run_clip
@@ -115,6 +117,8 @@ def run(args=None):
                 half = g["hi"] - g["median"] if t >= g["median"] else g["median"] - g["lo"]
                 err = abs(t - g["median"])
                 gait_z.append((name, err / half if half > 0 else (0.0 if err == 0 else np.inf)))
+            # the raw bootstrap deviations times each angle's noise-ratio factor, as angle_bands has them
+            ratio = json.loads((Path(tmp) / "out" / "run.json").read_text()).get("band_noise_ratio", {})
             for fam, keys in FAMILIES.items():
                 parts = []
                 for k in keys:
@@ -123,7 +127,8 @@ def run(args=None):
                     c = angle_curvature(med, fps)
                     c = np.where(np.isfinite(c), c, 0.0)
                     ok = np.isfinite(med) & np.isfinite(lo) & np.isfinite(hi) & np.isfinite(t)
-                    parts.append(np.stack([med, med - lo, hi - med, t, c])[:, ok])
+                    g = noise_ratio_factor(ratio.get(k))
+                    parts.append(np.stack([med, g * (med - lo), g * (hi - med), t, c])[:, ok])
                 data[fam].append(tuple(np.concatenate(parts, 1)))
     _accuracy_section(rep, names, accuracy)
     rows, fitted = [], {}

@@ -57,7 +57,9 @@ class DrawPropagation:
         dict
             ``joints`` (S, F, 17, 3) and ``angles`` {name: (S, F)} with noise;
             ``joints_point``, ``angles_point`` without; ``gait_point`` {name: (S,)} from
-            the point liftings, ``gait`` from the noisy ones (contacts detected anew).
+            the point liftings, ``gait`` from the noisy ones (contacts detected anew);
+            ``angle_noise_point`` and ``angle_noise`` {name: (S,)}: the noise (deg) the
+            cross-stride angle smoothing estimated in each lifting (angles it smoothed only).
         """
         t0 = time.perf_counter()
         with_noise = self.bootstraps_noise(bootstrap_noise)
@@ -168,11 +170,14 @@ class DrawPropagation:
                "joints_point": np.full((S, self.F, 17, 3), np.nan, np.float32),
                "angles": {k: np.full((S, self.F), np.nan) for k in ANGLE_NAMES},
                "angles_point": {k: np.full((S, self.F), np.nan) for k in ANGLE_NAMES},
-               "gait": {}, "gait_point": {}}
+               "gait": {}, "gait_point": {}, "angle_noise": {}, "angle_noise_point": {}}
         for part in parts:
             for s, res in part.items():
                 for key in ("joints", "joints_point"):
                     out[key][s] = res[key]
+                for key in ("angle_noise", "angle_noise_point"):
+                    for k, v in res.get(key, {}).items():
+                        out[key].setdefault(k, np.full(S, np.nan))[s] = v
                 for key in ("angles", "angles_point"):
                     for k in ANGLE_NAMES:
                         out[key][k][s] = res[key][k]
@@ -212,6 +217,9 @@ class DrawPropagation:
                 a = res.angles_deg()
                 res_s["joints" + suffix] = res.joints_track_m.astype(np.float32)
                 res_s["angles" + suffix] = a
+                # the cross-stride smoother's estimate of each angle's noise (deg): the data's and
+                # the bootstrap's are compared by probreg.inference.bands.bootstrap_noise_ratio
+                res_s["angle_noise" + suffix] = {k: float(v[0]) for k, v in res.extra.get("angle_noise", {}).items()}
                 if suffix == "_point":
                     res_s["gait_point"] = dict(gait_summary(res.track, a, self.fps))
                 else:
@@ -220,6 +228,7 @@ class DrawPropagation:
                     res_s["gait"] = dict(gait_summary(fit_ground_track(cams, kp, self.fps, config=tcfg), a, self.fps))
             if not with_noise:
                 res_s["joints"], res_s["angles"] = res_s["joints_point"], res_s["angles_point"]
+                res_s["angle_noise"] = res_s["angle_noise_point"]
                 res_s["gait"] = res_s["gait_point"]
             out[s] = res_s
         return out
