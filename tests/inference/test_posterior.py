@@ -165,8 +165,12 @@ def test_run_pipeline_writes_the_result_layout(small_clip, tmp_path):
     assert npz["samples"].shape[0] == FAST.n_draws and npz["median"].shape == (40, 17, 3)
     cam = json.loads((out / "camera.json").read_text())
     assert cam["height_m"]["lo"] <= cam["height_m"]["median"] <= cam["height_m"]["hi"]
-    priors = json.loads((out / "run.json").read_text())["priors"]
+    run = json.loads((out / "run.json").read_text())
+    priors = run["priors"]
     assert set(priors) == {"camera_height", "stature", "running_speed"}
+    # the data's angle noise over the bootstrap's, for the angles the cross-stride smoothing ran
+    # on: 40 frames are less than the 1.5 strides it needs, so none here (the bands as without)
+    assert run["band_noise_ratio"] == {}
     assert priors["running_speed"] == "flat up to 12.5 m/s, half-normal of sd 0.5 m/s beyond"
     import arviz as az
 
@@ -346,6 +350,33 @@ def test_angle_bands_scale_the_bootstrap_and_add_the_curvature_term():
     assert np.allclose(lo1, par) and np.allclose(hi1, par)
     _, lo0, hi0 = angle_bands(same, same)["knee_l"]
     assert np.allclose(hi0, par)
+
+
+def test_noise_ratio_scales_the_bootstrap_part_of_the_band():
+    """Known answers: data 4x noisier than the bootstrap doubles the bootstrap part of the band
+    (square root of the ratio), 4x less noisy halves it, a ratio beyond the clipping range acts
+    as its end, an angle without a ratio keeps its band, ``inflation`` ignores the ratio; the
+    ratio itself is the medians' quotient over the draws (NaN draws left out)."""
+    from probreg.inference import BAND_SCALE, angle_bands, bootstrap_noise_ratio
+    from probreg.inference.bands import NOISE_RATIO_RANGE
+
+    fps, F = 50.0, 100
+    line = 30.0 + 10.0 * np.arange(F) / fps
+    offsets = np.linspace(-1.0, 1.0, 101)[:, None]  # 5th/95th percentile -0.9/+0.9
+    point = {k: np.tile(line, (5, 1)) for k in ("knee_l", "knee_r", "hip_l")}
+    noisy = {k: line + offsets for k in point}
+    base = BAND_SCALE["knee"] * 0.9
+    bands = angle_bands(point, noisy, fps=fps, noise_ratio={"knee_l": 4.0, "knee_r": 0.25})
+    assert np.allclose(bands["knee_l"][2] - line, 2.0 * base) and np.allclose(line - bands["knee_l"][1], 2.0 * base)
+    assert np.allclose(bands["knee_r"][2] - line, 0.5 * base)
+    assert np.allclose(bands["hip_l"][2] - line, BAND_SCALE["hip"] * 0.9)  # no ratio: unchanged
+    far = angle_bands(point, noisy, fps=fps, noise_ratio={"knee_l": 100.0})["knee_l"]
+    assert np.allclose(far[2] - line, np.sqrt(NOISE_RATIO_RANGE[1]) * base)
+    raw = angle_bands(point, noisy, fps=fps, inflation=1.0, noise_ratio={"knee_l": 4.0})["knee_l"]
+    assert np.allclose(raw[2] - line, 0.9)
+    r = bootstrap_noise_ratio({"knee_l": np.array([3.0, 3.0, 9.0]), "hip_l": np.array([2.0])},
+                              {"knee_l": np.array([1.0, 1.5, np.nan, 1.5])})
+    assert r == {"knee_l": pytest.approx(2.0)}
 
 
 def test_gait_intervals_carry_the_step_timing_uncertainty(model):
