@@ -104,8 +104,8 @@ class RunResult:
     lens: dict = field(default_factory=dict)
     athlete: dict = field(default_factory=dict)
     band_decomposition: dict = field(default_factory=dict)
-    # the family branch (probreg.inference.evidence.BranchChoice)
-    branch: object = None
+    branch: object = None  # the family branch (probreg.inference.evidence.BranchChoice)
+    band_noise_ratio: dict = field(default_factory=dict)  # run.json's: bands.bootstrap_noise_ratio
 
 
 #: report figures drawn in a forked process while the files are written (html.run_figures); the
@@ -468,7 +468,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                        gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
                        verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,
                        frame_status=status, lens=lens_doc, band_decomposition=decomposition,
-                       branch=branch, athlete=athlete)
+                       branch=branch, athlete=athlete, band_noise_ratio=ratio)
     with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=inputs, log=log) as tmp:
         if options.report:  # most figures render on the other core while the files are written here
             figures = fork_call(lambda: render_figures(clip, result, REPORT_FIGURES_ELSEWHERE))
@@ -485,8 +485,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         write_json(tmp / "camera.json", cj)
         idata.to_netcdf(str(tmp / "posterior.nc"))
         write_json(tmp / "gait.json", gait_s)
-        extra = {} if clip.keypoints_outside is None else {
-            "keypoints_outside_image": clip.keypoints_outside.tolist()}
+        kpo = clip.keypoints_outside
+        extra = {} if kpo is None else {"keypoints_outside_image": kpo.tolist()}
         write_json(tmp / "run.json", {"verdict": verdict, "verdict_reasons": reasons,
                                      "camera_side": side.to_dict(), "branch": branch.to_json(),
                                      "input_notes": list(clip.notes), **extra,

@@ -301,6 +301,14 @@ def run_report(out_html, clip, result, joints_median, cameras, rendered=None):
                   f"{max(d['tau'].values()):.0f} steps ({d['steps_per_tau']:.0f} tau), ESS(height) "
                   f"{d['ess_height']:.0f}, R-hat(height) {d['rhat_height']:.3f}.", cls="note")
     rep.figure(fig("angles"), "Joint angles with 90 % credible bands (calibration, limb lengths and detector noise)")
+    ratio = getattr(result, "band_noise_ratio", None) or {}
+    if ratio:
+        from ..inference.bands import noise_ratio_factor
+
+        rep.paragraph("Detector noise in the angles, the data's over the bootstrap's (the band's bootstrap part "
+                      "scaled by the factor in brackets; probreg.inference.bands.bootstrap_noise_ratio): "
+                      + ", ".join(f"{k} {v:.2f} (x{noise_ratio_factor(v):.2f})" for k, v in sorted(ratio.items()))
+                      + ".", cls="note")
     if "gait_cycle" in figs:
         rep.figure(fig("gait_cycle"),
                    "Joint angles over the gait cycle (touchdown to touchdown of the same foot, 0-100 %; mean over "
