@@ -175,6 +175,14 @@ def noise_ratio_factor(ratio):
     return float(np.clip(ratio, *NOISE_RATIO_RANGE) ** NOISE_RATIO_POWER)
 
 
+def _bootstrap_scale(family, name, inflation, noise_ratio):
+    """The factor on an angle's bootstrap deviations: ``inflation`` when given, else the family's
+    :data:`BAND_SCALE` times the angle's :func:`noise_ratio_factor`."""
+    if inflation is not None:
+        return float(inflation)
+    return BAND_SCALE.get(family, max(BAND_SCALE.values())) * noise_ratio_factor((noise_ratio or {}).get(name))
+
+
 def angle_bands(angles_point, angles_noisy, fps=None, lo=5.0, hi=95.0, inflation=None, noise_ratio=None):
     """Per-frame median and band of every angle.
 
@@ -203,11 +211,10 @@ def angle_bands(angles_point, angles_noisy, fps=None, lo=5.0, hi=95.0, inflation
             dev_lo = centre - np.nanpercentile(noisy, lo, 0)
             dev_hi = np.nanpercentile(noisy, hi, 0) - centre
             fam = _band_family(name)
+            k = _bootstrap_scale(fam, name, inflation, noise_ratio)
             if inflation is not None:
-                k, bias = float(inflation), 0.0
+                bias = 0.0
             else:
-                k = BAND_SCALE.get(fam, max(BAND_SCALE.values()))
-                k *= noise_ratio_factor((noise_ratio or {}).get(name))
                 a = 0.0 if fam == "trunk_lean" or fps is None else BAND_CURVATURE_S2
                 bias = a * np.abs(angle_curvature(med, fps)) if a > 0 else 0.0
                 bias = np.where(np.isfinite(bias), bias, 0.0)
@@ -304,8 +311,7 @@ def gait_cycle_bands(angles_point, angles_noisy, contacts, n_points=101, lo=5.0,
             noisy = np.array([mean_cycle_curve(a, contact, n_points) for a in np.atleast_2d(angles_noisy[name])])
             med = np.nanmedian(pts, 0)
             centre = np.nanmedian(noisy, 0)
-            k = (float(inflation) if inflation is not None else BAND_SCALE.get(angle, max(BAND_SCALE.values()))
-                 * noise_ratio_factor((noise_ratio or {}).get(name)))
+            k = _bootstrap_scale(angle, name, inflation, noise_ratio)
             lo_c = med - k * (centre - np.nanpercentile(noisy, lo, 0))
             hi_c = med + k * (np.nanpercentile(noisy, hi, 0) - centre)
             out[(angle, side)] = (pct, med, lo_c, hi_c, n_cyc)
