@@ -494,8 +494,10 @@ def register_frames(frame_lanes, image_size, forward_px=(1.0, 0.0), lane_width_m
 #: the second on a forked process, when two cores are there (:func:`register_clip`)
 SPLIT_MIN_FRAMES = 60
 #: the share of the frames the calling process follows itself when a clip is split (less than
-#: half: it also runs the import warm-up of :func:`probreg.pipeline.run_clip` meanwhile)
-SPLIT_SHARE = 0.45
+#: half: it also runs the import warm-up of :func:`probreg.pipeline.run_clip` meanwhile, about a
+#: second of one core; at 0.45 the background part of ``run_a`` finished 0.4-0.7 s before the
+#: calling one, at 0.40 both end together)
+SPLIT_SHARE = 0.40
 
 
 def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(), smooth=True,
@@ -512,8 +514,10 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
     waiting for its result, e.g. :func:`probreg.inference.parallel.fork_call`), a clip of
     :data:`SPLIT_MIN_FRAMES` frames or more in an image folder is followed in two parts, the
     first :data:`SPLIT_SHARE` of it here, the rest in the background from a frame the single
-    pass would detect in full too (so every frame is measured as in one pass), its line
-    identities then continued from the first part's (:func:`probreg.lanes.tracking.stitch_tracks`).
+    pass would detect in full too (so every frame is measured as in one pass, but for the frame
+    after the seam: its global-motion estimate differs by ~0.01 px, as OpenCV windows the
+    previous image in place in one pass), its line identities then continued from the first
+    part's (:func:`probreg.lanes.tracking.stitch_tracks`).
     ``started()``, when given, is called once the background work is started (threads must
     start only then: a fork while another thread holds an import lock could hang).
     """

@@ -13,6 +13,7 @@ camera hypothesis implies (the Bayesian model uses it).
 
 from __future__ import annotations
 
+import math
 import warnings
 from dataclasses import dataclass
 
@@ -21,7 +22,7 @@ import numpy as np
 from ..geometry import JOINT_INDEX
 
 __all__ = ["GroundTrack", "TrackConfig", "camera_track_config", "cast_ankles", "detect_contacts", "fit_ground_track",
-           "sagittal_ankle_points", "sagittal_ankle_height", "gate_contacts_by_height"]
+           "sagittal_ankle_points", "sagittal_ankle_height", "gate_contacts_by_height", "gated_forward_pass", "rts_backward"]
 
 
 @dataclass(frozen=True)
@@ -407,38 +408,99 @@ def _track_from_contacts(ankles, contacts, fps, config):
     sd0 = 1.4826 * float(np.median(np.abs(lat0 - p0[1]))) if len(keys) >= 3 else 0.7
     kf.x = np.array([p0[0], v0[0], p0[1], v0[1]])
     kf.P = np.diag([4.0, 4.0, float(np.clip(sd0, 0.05, 0.7)) ** 2, 0.1**2])
-    xs, Ps = np.zeros((F, 4)), np.zeros((F, 4, 4))
-    loglik = 0.0
-    run_rejected = 0
-    P0 = kf.P.copy()
-    for i in range(F):
-        if i > 0:
-            kf.predict()
-        if i in meas:
-            # gate outliers: an innovation beyond ~4 sigma (chi-square, 2 dof, p ~ 3e-4) is
-            # not used, but still costs its log-likelihood so hypotheses cannot hide data
-            y = meas[i] - kf.H @ kf.x
-            S = kf.H @ kf.P @ kf.H.T + kf.R
-            nis = float(y @ np.linalg.solve(S, y))
-            rejected = nis > 16.0 and i != keys[0]
-            # the innovation's Gaussian log-density (what ``kf.log_likelihood`` gives, without
-            # scipy's per-call overhead), its exponent capped at the gate for a rejected one
-            loglik += -0.5 * (16.0 if rejected else nis) - 0.5 * float(np.log(np.linalg.det(2 * np.pi * S)))
-            if rejected:
-                if run_rejected < config.max_rejected_run:
-                    run_rejected += 1
-                else:
-                    # a run of rejections: the filter, not the footprints, went astray
-                    kf.P = P0.copy()
-                    kf.update(meas[i])
-                    run_rejected = 0
-            else:
-                kf.update(meas[i])
-                run_rejected = 0
-        xs[i], Ps[i] = kf.x, kf.P
+    xs, Ps, loglik = gated_forward_pass(kf, meas, F, first=keys[0], max_rejected_run=config.max_rejected_run)
     xs, Ps = rts_backward(xs, Ps, kf.F, kf.Q)
     return GroundTrack(position_m=xs[:, [0, 2]], velocity_mps=xs[:, [1, 3]], cov=Ps, contacts=contacts,
                        contact_points_m=cps, log_likelihood=loglik, status=status, half_step_m=half_step)
+
+
+def gated_forward_pass(kf, meas, n, first=None, max_rejected_run=2, gate=16.0):
+    """The forward pass of the ground-track filter: ``(xs (n, 4), Ps (n, 4, 4), log_likelihood)``.
+
+    ``kf`` is a ``filterpy`` ``KalmanFilter`` of two independent constant-velocity axes (state
+    ``[x, vx, y, vy]``, ``H`` picking ``x`` and ``y``; ``F``, ``Q``, ``R`` and the start ``P``
+    without cross-axis terms, as :func:`_track_from_contacts` builds it); ``meas`` maps a frame
+    index to its 2-D measurement.  Each step is ``kf.predict()`` then, for a measured frame,
+    ``kf.update(z)`` -- the same formulas (Joseph-form update) written per axis in scalars, which
+    the block structure keeps exact and which costs a tenth of filterpy's per-call overhead (the
+    filter runs for every posterior draw).  An innovation whose squared Mahalanobis length exceeds
+    ``gate`` (chi-square, 2 dof, p ~ 3e-4) is not used, except on frame ``first``, but still
+    costs its Gaussian log-density with the exponent capped at the gate, so that hypotheses
+    cannot hide data; after ``max_rejected_run`` rejections in a row the filter, not the
+    footprints, went astray: its covariance restarts from the start ``P`` and the measurement
+    is taken.
+
+    >>> from filterpy.common import Q_discrete_white_noise
+    >>> from filterpy.kalman import KalmanFilter
+    >>> kf = KalmanFilter(dim_x=4, dim_z=2); dt = 0.02
+    >>> kf.F = np.kron(np.eye(2), np.array([[1.0, dt], [0.0, 1.0]])); kf.H = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
+    >>> kf.Q = np.zeros((4, 4)); kf.Q[:2, :2] = Q_discrete_white_noise(2, dt=dt, var=2.0)
+    >>> kf.Q[2:, 2:] = Q_discrete_white_noise(2, dt=dt, var=0.4); kf.R = np.diag([0.01, 0.001])
+    >>> kf.x = np.array([0.0, 9.0, 0.0, 0.0]); kf.P = np.diag([4.0, 4.0, 0.09, 0.01])
+    >>> meas = {i: np.array([0.18 * i + 0.05 * np.sin(i), 0.02 * np.cos(i)]) for i in range(0, 40, 3)}
+    >>> xs, Ps, _ = gated_forward_pass(kf, meas, 40, first=0)
+    >>> ref = []
+    >>> for i in range(40):
+    ...     if i > 0: kf.predict()
+    ...     if i in meas: kf.update(meas[i])
+    ...     ref.append((kf.x.copy(), kf.P.copy()))
+    >>> bool(np.allclose(xs, [r[0] for r in ref], rtol=1e-12, atol=1e-12)
+    ...      and np.allclose(Ps, [r[1] for r in ref], rtol=1e-12, atol=1e-12))
+    True
+    """
+    dt = float(kf.F[0, 1])
+    q = [(float(kf.Q[o, o]), float(kf.Q[o, o + 1]), float(kf.Q[o + 1, o + 1])) for o in (0, 2)]
+    r = (float(kf.R[0, 0]), float(kf.R[1, 1]))
+    x0 = np.asarray(kf.x, float).ravel()
+    P0 = np.asarray(kf.P, float)
+    start = [(float(P0[o, o]), float(P0[o, o + 1]), float(P0[o + 1, o + 1])) for o in (0, 2)]
+    px, vx, py, vy = (float(v) for v in x0)
+    (ax, bx, cx), (ay, by, cy) = start
+    (qx1, qx2, qx3), (qy1, qy2, qy3) = q
+    rx, ry = r
+    log_2pi_sq = 2.0 * math.log(2.0 * math.pi)
+    states, covs = [], []
+    loglik, run_rejected = 0.0, 0
+    for i in range(n):
+        if i > 0:  # predict: x = F x, P = F P F' + Q
+            px, py = px + dt * vx, py + dt * vy
+            ax, bx, cx = ax + dt * (2.0 * bx + dt * cx) + qx1, bx + dt * cx + qx2, cx + qx3
+            ay, by, cy = ay + dt * (2.0 * by + dt * cy) + qy1, by + dt * cy + qy2, cy + qy3
+        z = meas.get(i)
+        if z is not None:
+            zx, zy = float(z[0]), float(z[1])
+            sx, sy = ax + rx, ay + ry
+            ex, ey = zx - px, zy - py
+            nis = ex * ex / sx + ey * ey / sy
+            rejected = nis > gate and i != first
+            loglik += -0.5 * (gate if rejected else nis) - 0.5 * (log_2pi_sq + math.log(sx * sy))
+            take = not rejected
+            if rejected:
+                if run_rejected < max_rejected_run:
+                    run_rejected += 1
+                else:
+                    (ax, bx, cx), (ay, by, cy) = start
+                    sx, sy = ax + rx, ay + ry
+                    take = True
+            if take:
+                run_rejected = 0
+                k0, k1 = ax / sx, bx / sx
+                px, vx = px + k0 * ex, vx + k1 * ex
+                ax, bx, cx = ((1 - k0) ** 2 * ax + k0 * k0 * rx, (1 - k0) * (bx - k1 * ax) + k0 * k1 * rx,
+                              cx - 2.0 * k1 * bx + k1 * k1 * (ax + rx))
+                k0, k1 = ay / sy, by / sy
+                py, vy = py + k0 * ey, vy + k1 * ey
+                ay, by, cy = ((1 - k0) ** 2 * ay + k0 * k0 * ry, (1 - k0) * (by - k1 * ay) + k0 * k1 * ry,
+                              cy - 2.0 * k1 * by + k1 * k1 * (ay + ry))
+        states.append((px, vx, py, vy))
+        covs.append((ax, bx, cx, ay, by, cy))
+    xs = np.array(states, float).reshape(n, 4)
+    c = np.array(covs, float).reshape(n, 6)
+    Ps = np.zeros((n, 4, 4))
+    for o, j in ((0, 0), (2, 3)):
+        Ps[:, o, o], Ps[:, o, o + 1], Ps[:, o + 1, o + 1] = c[:, j], c[:, j + 1], c[:, j + 2]
+        Ps[:, o + 1, o] = c[:, j + 1]
+    return xs, Ps, loglik
 
 
 def rts_backward(xs, Ps, F, Q):
@@ -469,11 +531,50 @@ def rts_backward(xs, Ps, F, Q):
     K = Pf @ F.T @ np.linalg.inv(Pp)
     a = x[:-1] - np.einsum("kij,kj->ki", K, x[:-1] @ F.T)  # x[k] + K (x_s[k + 1] - F x[k])
     B = Pf - K @ Pp @ np.swapaxes(K, 1, 2)  # P[k] + K (P_s[k + 1] - Pp) K'
+    if _pairs_decoupled(F, Q, P):
+        # independent 2-state axes (the ground track's x and y): the recursions in scalars, a
+        # fifth of the small-matrix products' cost (this runs for every posterior draw)
+        for i in range(0, x.shape[1], 2):
+            _rts_pair(x, P, a, K, B, i, i + 1)
+        return x, P
     for k in range(len(x) - 2, -1, -1):
         Kk = K[k]
         x[k] = a[k] + Kk @ x[k + 1]
         P[k] = B[k] + Kk @ P[k + 1] @ Kk.T
     return x, P
+
+
+def _pairs_decoupled(F, Q, P):
+    """Whether the states fall into independent pairs (0, 1), (2, 3), ...: no entry of ``F``,
+    ``Q`` or any ``P`` couples two pairs."""
+    d = F.shape[0]
+    if d % 2 or d < 2:
+        return False
+    pair = np.arange(d) // 2
+    cross = pair[:, None] != pair[None, :]
+    return not (np.any(F[cross]) or np.any(Q[cross]) or np.any(P[:, cross]))
+
+
+def _rts_pair(x, P, a, K, B, i, j):
+    """The two backward recursions of :func:`rts_backward` for the decoupled state pair
+    ``(i, j)``, in place (the same formulas, ``P`` kept symmetric)."""
+    a0, a1 = a[:, i].tolist(), a[:, j].tolist()
+    k00, k01, k10, k11 = (K[:, u, v].tolist() for u, v in ((i, i), (i, j), (j, i), (j, j)))
+    b00, b01, b11 = (B[:, u, v].tolist() for u, v in ((i, i), (i, j), (j, j)))
+    x0, x1 = float(x[-1, i]), float(x[-1, j])
+    p, q, r = float(P[-1, i, i]), float(P[-1, i, j]), float(P[-1, j, j])
+    n = len(x)
+    xs0, xs1, ps, qs, rs = [0.0] * n, [0.0] * n, [0.0] * n, [0.0] * n, [0.0] * n
+    xs0[-1], xs1[-1], ps[-1], qs[-1], rs[-1] = x0, x1, p, q, r
+    for k in range(n - 2, -1, -1):
+        c00, c01, c10, c11 = k00[k], k01[k], k10[k], k11[k]
+        x0, x1 = a0[k] + c00 * x0 + c01 * x1, a1[k] + c10 * x0 + c11 * x1
+        m00, m01 = c00 * p + c01 * q, c00 * q + c01 * r  # K P
+        m10, m11 = c10 * p + c11 * q, c10 * q + c11 * r
+        p, q, r = b00[k] + m00 * c00 + m01 * c01, b01[k] + m00 * c10 + m01 * c11, b11[k] + m10 * c10 + m11 * c11
+        xs0[k], xs1[k], ps[k], qs[k], rs[k] = x0, x1, p, q, r
+    x[:, i], x[:, j] = xs0, xs1
+    P[:, i, i], P[:, i, j], P[:, j, i], P[:, j, j] = ps, qs, qs, rs
 
 
 def _runs(flags):

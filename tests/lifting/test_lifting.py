@@ -402,3 +402,94 @@ def test_rts_backward_equals_filterpys_smoother_on_the_ground_track_model():
     np.testing.assert_allclose(x, x_ref, rtol=1e-10, atol=1e-10)
     np.testing.assert_allclose(P, P_ref, rtol=1e-8, atol=1e-14)
     assert rts_backward(xs[:1], Ps[:1], kf.F, kf.Q)[0].shape == (1, 4)  # one frame: nothing to smooth
+
+
+def _filterpy_gated_forward(kf, meas, n, first, max_rejected_run, gate=16.0):
+    """The gated forward pass written with filterpy's own predict/update (the reference)."""
+    xs, Ps, loglik, run, P0 = np.zeros((n, 4)), np.zeros((n, 4, 4)), 0.0, 0, kf.P.copy()
+    for i in range(n):
+        if i:
+            kf.predict()
+        if i in meas:
+            y = meas[i] - kf.H @ kf.x
+            S = kf.H @ kf.P @ kf.H.T + kf.R
+            nis = float(y @ np.linalg.solve(S, y))
+            rejected = nis > gate and i != first
+            loglik += -0.5 * (gate if rejected else nis) - 0.5 * float(np.log(np.linalg.det(2 * np.pi * S)))
+            if not rejected:
+                kf.update(meas[i])
+                run = 0
+            elif run < max_rejected_run:
+                run += 1
+            else:
+                kf.P = P0.copy()
+                kf.update(meas[i])
+                run = 0
+        xs[i], Ps[i] = kf.x, kf.P
+    return xs, Ps, loglik
+
+
+@pytest.mark.parametrize("max_run", [2, 10**6])
+def test_gated_forward_pass_equals_filterpys_predict_update_with_gating_and_restarts(max_run):
+    """The scalar per-axis forward pass against filterpy's ``predict``/``update`` on the ground
+    track's model, with footprints that fail the gate: single outliers (rejected), a run of
+    them (the covariance restart) and the first footprint (never gated)."""
+    from filterpy.common import Q_discrete_white_noise
+    from filterpy.kalman import KalmanFilter
+
+    from probreg.lifting.trajectory import gated_forward_pass
+
+    def model():
+        kf = KalmanFilter(dim_x=4, dim_z=2)
+        dt = 0.04
+        kf.F = np.kron(np.eye(2), np.array([[1.0, dt], [0.0, 1.0]]))
+        kf.H = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
+        kf.Q = np.zeros((4, 4))
+        kf.Q[:2, :2] = Q_discrete_white_noise(2, dt=dt, var=1.5**2)
+        kf.Q[2:, 2:] = Q_discrete_white_noise(2, dt=dt, var=0.6**2)
+        kf.R = np.diag([0.10, 0.03]) ** 2
+        kf.x, kf.P = np.array([0.5, 7.0, -2.0, 0.0]), np.diag([4.0, 4.0, 0.2**2, 0.1**2])
+        return kf
+
+    rng = np.random.default_rng(11)
+    n = 200
+    meas = {i: np.array([7.0 * i * 0.04, -2.0]) + rng.normal(0, [0.1, 0.03]) for i in range(0, n, 5)}
+    for i in (40, 95, 100, 105, 110, 115):  # a lone outlier, then a run of five
+        meas[i] = meas[i] + np.array([1.5, 0.6])
+    xs, Ps, ll = gated_forward_pass(model(), meas, n, first=0, max_rejected_run=max_run)
+    x_ref, P_ref, ll_ref = _filterpy_gated_forward(model(), meas, n, 0, max_run)
+    np.testing.assert_allclose(xs, x_ref, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(Ps, P_ref, rtol=1e-9, atol=1e-14)
+    assert ll == pytest.approx(ll_ref, rel=1e-12)
+    # the outliers really were gated: without the gate the track is pulled towards them
+    free, _, _ = gated_forward_pass(model(), meas, n, first=0, max_rejected_run=max_run, gate=np.inf)
+    assert np.abs(free[96:120, 0] - xs[96:120, 0]).max() > 0.2
+
+
+def test_rts_backward_equals_filterpys_smoother_on_a_coupled_model():
+    """A model whose states do not fall into independent pairs (constant acceleration, 3
+    states) takes the general recursion: the same answer as filterpy's ``rts_smoother``."""
+    from filterpy.common import Q_discrete_white_noise
+    from filterpy.kalman import KalmanFilter
+
+    from probreg.lifting.trajectory import _pairs_decoupled, rts_backward
+
+    rng = np.random.default_rng(5)
+    dt, n = 0.04, 120
+    kf = KalmanFilter(dim_x=3, dim_z=1)
+    kf.F = np.array([[1.0, dt, 0.5 * dt * dt], [0.0, 1.0, dt], [0.0, 0.0, 1.0]])
+    kf.H = np.array([[1.0, 0.0, 0.0]])
+    kf.Q = Q_discrete_white_noise(3, dt=dt, var=0.5)
+    kf.R = np.array([[0.02]])
+    kf.x, kf.P = np.zeros(3), np.eye(3)
+    xs, Ps = np.zeros((n, 3)), np.zeros((n, 3, 3))
+    for i in range(n):
+        if i:
+            kf.predict()
+        kf.update(np.array([np.sin(0.1 * i)]) + rng.normal(0, 0.1))
+        xs[i], Ps[i] = kf.x, kf.P
+    assert not _pairs_decoupled(kf.F, kf.Q, Ps)
+    x_ref, P_ref, _, _ = kf.rts_smoother(xs, Ps)
+    x, P = rts_backward(xs, Ps, kf.F, kf.Q)
+    np.testing.assert_allclose(x, x_ref, rtol=1e-10, atol=1e-10)
+    np.testing.assert_allclose(P, P_ref, rtol=1e-8, atol=1e-14)
