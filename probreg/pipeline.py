@@ -403,23 +403,20 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         return _write_uncalibrated(clip, reg, reg.camera_side, out_dir, options, exc, t0, log, inputs,
                                    extra_files)
     smp = options.sampler
-    copies = None
-    if model.bootstraps_noise(smp.bootstrap_noise):
-        # the bootstrap's re-noised keypoints do not depend on the posterior: made on the other
-        # core while the sampler runs on this one
-        n_copies = -(-smp.n_draws // smp.draws_per_noise_copy)
-        copies = fork_call(lambda: model.bootstrap_copies(np.random.default_rng([smp.seed, 1]), n_copies))
+    # the bootstrap's re-noised keypoints do not depend on the posterior: made on the other core
+    # while the sampler runs on this one (the propagation's workers make the rest)
+    n_copies = -(-smp.n_draws // smp.draws_per_noise_copy)
+    ahead = (model.bootstrap_copies_ahead(np.random.default_rng([smp.seed, 1]), n_copies)
+             if model.bootstraps_noise(smp.bootstrap_noise) else None)
     sampler, tau = model.sample(smp, progress=options.progress)
     chain = sampler.get_chain()  # (steps, walkers, D)
     flat = chain.reshape(-1, chain.shape[-1])
     rng = np.random.default_rng(smp.seed)
     draws = flat[rng.choice(len(flat), min(smp.n_draws, len(flat)), replace=False)]
-    if copies is not None:
-        t_wait = time.perf_counter()
-        copies = copies()
-        model.timings["noise_copies_wait_s"] = time.perf_counter() - t_wait
+    copies, seeds = ahead() if ahead is not None else (None, None)
     prop = model.propagate(draws, rng, bootstrap_noise=smp.bootstrap_noise, progress=options.progress,
-                           draws_per_noise_copy=smp.draws_per_noise_copy, noise_copies=copies)
+                           draws_per_noise_copy=smp.draws_per_noise_copy, noise_copies=copies,
+                           noise_copy_seeds=seeds)
     joints, gait = prop["joints"], prop["gait"]
     decomposition = model.band_decomposition(draws, prop, rng)
     idata = posterior_inference_data(sampler, keypoints_px=clip.keypoints_px, frame_lanes=reg.frame_lanes,

@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["default_workers", "fork_map", "fork_call"]
+__all__ = ["default_workers", "fork_map", "fork_call", "stop_flag"]
 
 #: the function forked workers run on their chunk (set only while a pool runs)
 _FORKED = None
@@ -129,3 +129,28 @@ def fork_call(work):
         return value if status == "ok" else work()
 
     return result
+
+
+def stop_flag():
+    """A flag (``set()``, ``is_set()``) that a process forked after it is made sees when the caller
+    sets it, e.g. to tell :func:`fork_call` work to finish early; where processes cannot share
+    one, a flag of this process (work that runs here sees it).
+
+    >>> import time
+    >>> flag = stop_flag()
+    >>> def wait_for_it(limit_s=20.0):   # in the forked process: sees the flag set out here
+    ...     t0 = time.monotonic()
+    ...     while not flag.is_set() and time.monotonic() - t0 < limit_s:
+    ...         time.sleep(0.005)
+    ...     return flag.is_set()
+    >>> result = fork_call(wait_for_it)
+    >>> flag.set(); result()
+    True
+    """
+    import multiprocessing as mp
+    import threading
+
+    try:
+        return mp.get_context("fork").Event() if _can_fork() else threading.Event()
+    except OSError:  # no shared semaphores on this system
+        return threading.Event()

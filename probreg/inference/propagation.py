@@ -13,7 +13,7 @@ from ..filtering import clean_keypoints, score_noise_scale
 from ..geometry import ANGLE_NAMES, JOINT_INDEX, CameraArrays
 from ..lifting import LiftConfig, fit_ground_track, lift
 from ..lifting.trajectory import camera_track_config
-from .parallel import default_workers, fork_map
+from .parallel import default_workers, fork_call, fork_map, stop_flag
 
 __all__ = ["DrawPropagation"]
 
@@ -26,7 +26,7 @@ class DrawPropagation:
     (``noise_sd``, ``noise_rho``), ``contacts``, ``stride_lag``, ``gap_distance`` and ``timings``."""
 
     def propagate(self, draws, rng, bootstrap_noise=True, config: LiftConfig = LiftConfig(), workers=None,
-                  progress=None, draws_per_noise_copy=2, noise_copies=None):
+                  progress=None, draws_per_noise_copy=2, noise_copies=None, noise_copy_seeds=None):
         """Lift the clip for every draw.
 
         Each draw is lifted twice: from the cleaned keypoints (the draw's *point*
@@ -44,7 +44,9 @@ class DrawPropagation:
         its own copy).
 
         ``noise_copies`` (a list from :meth:`bootstrap_copies`, made ahead, e.g. while the
-        sampler runs) replaces the copies: draw ``s`` takes ``noise_copies[s mod len]``.
+        sampler runs) replaces the copies: draw ``s`` takes ``noise_copies[s mod len]``; an entry
+        that is ``None`` (the sampler finished first) is made here from ``noise_copy_seeds``
+        (the seeds the list was made from), the same copy as it would have been there.
 
         Every draw and every noise copy has its own random stream (spawned from ``rng``), so the result
         does not depend on ``workers``: draws are shared out over that many forked
@@ -64,7 +66,7 @@ class DrawPropagation:
         t0 = time.perf_counter()
         with_noise = self.bootstraps_noise(bootstrap_noise)
         out = self._lift_draws(draws, rng, with_noise, config, workers, progress, draws_per_noise_copy,
-                               noise_copies)
+                               noise_copies, noise_copy_seeds)
         self.timings["propagation_s"] = time.perf_counter() - t0
         return out
 
@@ -130,20 +132,54 @@ class DrawPropagation:
         level is known (clean keypoints have none to re-simulate)."""
         return bool(bootstrap_noise and np.isfinite(self.noise_sd) and self.noise_sd > 0)
 
-    def bootstrap_copies(self, rng, n):
-        """``n`` re-noised copies of the cleaned keypoints, each cleaned again as the data were
-        (the draw-independent half of the bootstrap), from ``rng``'s spawned streams."""
+    @staticmethod
+    def noise_copy_seeds(rng, n):
+        """The seeds of ``n`` noise copies (:meth:`bootstrap_copies`), from ``rng``."""
+        return rng.integers(0, 2**63 - 1, size=int(n))
+
+    def bootstrap_copies_ahead(self, rng, n):
+        """Start making ``n`` noise copies (seeds from ``rng``) in a forked process, while the
+        caller works on (e.g. samples); returns ``finish()``, which stops that process after the
+        copy it is making and gives ``(copies, seeds)`` for :meth:`propagate` (copies not made
+        are ``None``: the propagation's workers make them from the same seeds).  The time
+        ``finish`` waited (for the copy under way) goes to :attr:`timings`."""
+        seeds = self.noise_copy_seeds(rng, n)
+        stop = stop_flag()
+        result = fork_call(lambda: self.bootstrap_copies(seeds, stop=stop.is_set))
+
+        def finish():
+            t0 = time.perf_counter()
+            stop.set()
+            copies = result()
+            self.timings["noise_copies_wait_s"] = time.perf_counter() - t0
+            return copies, seeds
+
+        return finish
+
+    def bootstrap_copies(self, seeds, stop=None):
+        """Re-noised copies of the cleaned keypoints, each cleaned again as the data were (the
+        draw-independent half of the bootstrap), one per seed (:meth:`noise_copy_seeds`), in
+        order.  ``stop()``, when given, is asked before each copy: once it is true the rest are
+        left ``None`` (:meth:`propagate` makes them from the same seeds, so where a copy was
+        made does not change it)."""
         per_joint = self._joint_noise_scale()
-        seeds = rng.integers(0, 2**63 - 1, size=int(n))
-        return [self._noise_copy(np.random.default_rng(int(sd)), per_joint) for sd in seeds]
+        out = [None] * len(seeds)
+        for k, sd in enumerate(seeds):
+            if stop is not None and stop():
+                break
+            out[k] = self._noise_copy(np.random.default_rng(int(sd)), per_joint)
+        return out
 
     def _lift_draws(self, draws, rng, with_noise, config, workers, progress, draws_per_noise_copy=1,
-                    noise_copies=None):
+                    noise_copies=None, noise_copy_seeds=None):
         S = len(draws)
         if int(draws_per_noise_copy) < 1:
             raise ValueError(f"draws_per_noise_copy must be at least 1, got {draws_per_noise_copy}")
         if noise_copies is not None and len(noise_copies) == 0:
             raise ValueError("noise_copies is empty")
+        if noise_copies is not None and any(c is None for c in noise_copies) and (
+                noise_copy_seeds is None or len(noise_copy_seeds) != len(noise_copies)):
+            raise ValueError("noise_copies has missing entries: noise_copy_seeds (one per copy) must be given")
         cross = config.cross_stride_angles
         cross = self.stride_lag is not None if cross == "auto" else bool(cross)
         cfg = LiftConfig(**{**config.__dict__, "smooth_cutoff_hz": None, "cross_stride_angles": cross})
@@ -151,7 +187,7 @@ class DrawPropagation:
         seeds = rng.integers(0, 2**63 - 1, size=S)
         K = -(-S // int(draws_per_noise_copy)) if noise_copies is None else len(noise_copies)
         # noise copies, draw s uses copy s % K: given, or made by the workers from these seeds
-        noise_seeds = rng.integers(0, 2**63 - 1, size=K) if with_noise and noise_copies is None else None
+        noise_seeds = rng.integers(0, 2**63 - 1, size=K) if with_noise and noise_copies is None else noise_copy_seeds
         job = (draws, L, seeds, K, noise_copies, noise_seeds, cfg, with_noise,
                self._joint_noise_scale() if with_noise else None)
         workers = max(1, min(default_workers() if workers is None else int(workers), S))
@@ -203,7 +239,8 @@ class DrawPropagation:
             if with_noise:
                 k = s % K
                 if k not in copies:
-                    copies[k] = (noise_copies[k] if noise_copies is not None
+                    given = noise_copies[k] if noise_copies is not None else None
+                    copies[k] = (given if given is not None
                                  else self._noise_copy(np.random.default_rng(int(noise_seeds[k])), per_joint))
                 variants.append(("", copies[k]))
             res_s = {}

@@ -598,3 +598,30 @@ def test_running_speed_prior_is_flat_for_human_speeds_and_walls_off_the_rest(mod
     best, best_slow = x[np.nanargmax(ll)], x2[np.nanargmax(ll2)]
     v_best_slow = np.interp(best_slow, np.log(m.grid[ok]), m.speed_grid[ok])
     assert best_slow != best and v_best_slow < 0.75 * v_true
+
+
+def test_noise_copies_made_ahead_in_part_give_the_same_propagation(model):
+    """The copies made while the sampler runs may stop at any point: the propagation makes the
+    missing ones from the same seeds, so the result does not depend on how many were ready."""
+    m, gt = model
+    h = gt.cameras[0].C[2]
+    draws = np.tile(np.r_[np.log(h), gt.athlete["stature_m"], np.ones(len(PARAM_NAMES) - 2)], (4, 1))
+    draws[:, 0] += np.linspace(-0.05, 0.05, 4)
+    seeds = m.noise_copy_seeds(np.random.default_rng(9), 2)
+    full = m.bootstrap_copies(seeds)
+    calls = []
+    part = m.bootstrap_copies(seeds, stop=lambda: calls.append(1) or len(calls) > 1)  # stops after one copy
+    assert part[0] is not None and part[1] is None
+    assert np.array_equal(part[0], full[0], equal_nan=True)
+    a = m.propagate(draws, np.random.default_rng(5), workers=1, noise_copies=full)
+    b = m.propagate(draws, np.random.default_rng(5), workers=2, noise_copies=part, noise_copy_seeds=seeds)
+    for key in ("joints", "joints_point"):
+        assert np.array_equal(a[key], b[key], equal_nan=True)
+    with pytest.raises(ValueError, match="noise_copy_seeds"):
+        m.propagate(draws, np.random.default_rng(5), workers=1, noise_copies=part)
+    # made ahead in a forked process and stopped at once: every copy is then made by the workers
+    finish = m.bootstrap_copies_ahead(np.random.default_rng(9), 2)
+    copies, s2 = finish()
+    assert np.array_equal(s2, seeds) and len(copies) == 2
+    c = m.propagate(draws, np.random.default_rng(5), workers=1, noise_copies=copies, noise_copy_seeds=s2)
+    assert np.array_equal(a["joints"], c["joints"], equal_nan=True)
