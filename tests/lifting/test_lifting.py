@@ -493,3 +493,20 @@ def test_rts_backward_equals_filterpys_smoother_on_a_coupled_model():
     x, P = rts_backward(xs, Ps, kf.F, kf.Q)
     np.testing.assert_allclose(x, x_ref, rtol=1e-10, atol=1e-10)
     np.testing.assert_allclose(P, P_ref, rtol=1e-8, atol=1e-14)
+
+
+def test_gated_forward_pass_refuses_a_model_it_was_not_written_for():
+    from filterpy.kalman import KalmanFilter
+
+    from probreg.lifting.trajectory import gated_forward_pass
+
+    kf = KalmanFilter(dim_x=4, dim_z=2)
+    kf.F = np.kron(np.eye(2), np.array([[1.0, 0.02], [0.0, 1.0]]))
+    kf.H = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
+    kf.Q = np.eye(4) * 1e-3
+    kf.R = np.diag([0.01, 0.001])
+    kf.P = np.eye(4)
+    assert gated_forward_pass(kf, {0: np.zeros(2)}, 3)[0].shape == (3, 4)
+    kf.P[0, 2] = kf.P[2, 0] = 0.1  # the axes coupled: the scalar passes would be wrong
+    with pytest.raises(ValueError, match="independent"):
+        gated_forward_pass(kf, {0: np.zeros(2)}, 3)
