@@ -217,3 +217,40 @@ def test_knee_bands_too_wide_to_measure_the_knee_are_unreliable(sd, flagged):
     verdict, reasons = clip_verdict(**GOOD, knee_band_deg=width)
     assert (verdict == "unreliable") == flagged
     assert reasons == ([f"knee band wide (mean 90 % band {width:.1f} deg)"] if flagged else [])
+
+
+def _runner(direction=(1.0, 0.0), n=50):
+    """Joints whose pelvis runs 10 m at 1 m height in ``direction`` from the track's origin."""
+    d = np.asarray(direction, float) / np.hypot(*direction)
+    s = np.linspace(0.0, 10.0, n)
+    pelvis = np.stack([s * d[0], s * d[1], np.ones(n)], 1)
+    return np.repeat(pelvis[:, None], 17, 1)
+
+
+@pytest.mark.parametrize("azimuth, elevation", [(0.0, 0.0), (20.0, 0.0), (50.0, 0.0), (0.0, 40.0), (30.0, 30.0)])
+def test_view_obliquity_known_answers(azimuth, elevation):
+    from probreg.geometry import Camera
+    from probreg.inference.verdict import view_obliquity
+
+    # every frame's camera sits on a ray from the runner's pelvis at a fixed azimuth (from the
+    # sagittal normal, towards the direction of travel) and elevation: the view's angle from the
+    # side is then known, arccos(cos az cos el)
+    for direction in ((1.0, 0.0), (-1.0, 0.0), (1.0, 1.0)):
+        joints = _runner(direction)
+        d = np.append(np.asarray(direction) / np.hypot(*direction), 0.0)
+        normal = np.array([-d[1], d[0], 0.0])
+        a, e = np.radians(azimuth), np.radians(elevation)
+        offset = 30.0 * (np.cos(e) * (np.cos(a) * -normal + np.sin(a) * d) + np.sin(e) * np.array([0, 0, 1.0]))
+        cams = [Camera.look_at(p + offset, p, fov_deg=20.0) for p in joints[:, JOINT_INDEX["pelvis"]]]
+        cams[3] = None  # a frame without a camera does not count
+        want = np.degrees(np.arccos(np.cos(a) * np.cos(e)))
+        assert view_obliquity(cams, joints) == pytest.approx(want, abs=1e-6)
+    assert np.isnan(view_obliquity([None] * 50, joints))
+
+
+@pytest.mark.parametrize("obliquity, flagged", [(20.0, False), (34.0, False), (48.4, True)])
+def test_an_oblique_view_is_unreliable(obliquity, flagged):
+    verdict, reasons = clip_verdict(**GOOD, obliquity_deg=obliquity)
+    assert (verdict == "unreliable") == flagged
+    assert reasons == ([f"oblique view ({obliquity:.0f} deg from the side)"] if flagged else [])
+    assert clip_verdict(**GOOD, obliquity_deg=float("nan")) == ("ok", [])
