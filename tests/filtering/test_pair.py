@@ -128,3 +128,29 @@ def test_pair_falls_back_to_each_side_alone():
     assert np.allclose(xl, periodic_smooth_series(yl, lag, 50.0)[0])
     (xl, _), info = periodic_smooth_pair(yl, yr, None, 50.0)  # no strides: nothing to tie
     assert np.isnan(info["asym_sd"]) and np.array_equal(xl, yl)
+
+
+def test_a_reused_pair_system_gives_the_result_of_a_fresh_one():
+    from probreg.filtering import pair
+
+    rng = np.random.default_rng(4)
+    F, T = 150, 30.0
+    t = np.arange(F)
+    lag = np.full(F, T)
+    series = []
+    for gap in (False, True, False):  # the second pair has missing frames: another system
+        yl = 60 + 40 * np.sin(2 * np.pi * t / T) + rng.normal(0, 4, F)
+        yr = 60 + 40 * np.sin(2 * np.pi * (t + T / 2) / T) + rng.normal(0, 4, F)
+        if gap:
+            yl[20:24] = np.nan
+        series.append((yl, yr))
+    fresh = []
+    for yl, yr in series:
+        pair._SYSTEMS.clear()
+        fresh.append(periodic_smooth_pair(yl, yr, lag, 50.0))
+    pair._SYSTEMS.clear()
+    for (yl, yr), (want, info) in zip(series + series, fresh + fresh):
+        got, got_info = periodic_smooth_pair(yl, yr, lag, 50.0)
+        assert np.array_equal(got[0], want[0]) and np.array_equal(got[1], want[1])
+        assert got_info == info
+    assert len(pair._SYSTEMS) == 2  # one per distinct set of observed frames
