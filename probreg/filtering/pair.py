@@ -20,6 +20,7 @@ between them.
 
 from __future__ import annotations
 
+import threading
 from collections import OrderedDict
 
 import numpy as np
@@ -135,6 +136,7 @@ class PairSystem:
 #: the same observed frames draw after draw)
 _SYSTEMS: OrderedDict = OrderedDict()
 _SYSTEMS_MAX = 8
+_SYSTEMS_LOCK = threading.Lock()
 
 
 def pair_system(oks, lag, rho, p2_scale):
@@ -150,13 +152,16 @@ def pair_system(oks, lag, rho, p2_scale):
     oks = [np.asarray(o, bool) for o in oks]
     lag = np.asarray(lag, float)
     key = (oks[0].tobytes(), oks[1].tobytes(), lag.tobytes(), float(rho), float(p2_scale))
-    system = _SYSTEMS.get(key)
-    if system is None:
-        system = _SYSTEMS[key] = PairSystem(oks, lag, rho, p2_scale)
+    with _SYSTEMS_LOCK:  # liftings may run in threads (e.g. a Dask worker with several)
+        system = _SYSTEMS.get(key)
+        if system is not None:
+            _SYSTEMS.move_to_end(key)
+            return system
+    system = PairSystem(oks, lag, rho, p2_scale)
+    with _SYSTEMS_LOCK:
+        _SYSTEMS[key] = system
         while len(_SYSTEMS) > _SYSTEMS_MAX:
             _SYSTEMS.popitem(last=False)
-    else:
-        _SYSTEMS.move_to_end(key)
     return system
 
 
