@@ -124,10 +124,110 @@ from ..filtering.basic import NOISE_RHO_MAX
 from ..geometry import JOINT_INDEX
 
 __all__ = ["VerdictThresholds", "clip_verdict", "bone_length_cv", "knee_band_width", "posterior_modes",
-           "view_obliquity"]
+           "view_obliquity", "REASON_HELP", "explain_reason"]
 
 _LIMBS = {"thigh": ("hip", "knee"), "shank": ("knee", "ankle"), "upper_arm": ("shoulder", "elbow"),
           "forearm": ("elbow", "wrist")}
+
+
+#: For each verdict reason (by the words it starts with): what it means for the results, and what a
+#: user can do about it.  The report shows these beside the reasons.
+REASON_HELP = {
+    "frames_with_angles": (
+        "no frame produced an angle: there is nothing to use",
+        "check the lane overlays and the keypoints (is the athlete detected?)",
+    ),
+    "calibrated_frames": (
+        "too few frames found lanes that give a camera: the rest is guessed from them",
+        "check the lane overlays; a clip with the straight's lines in view calibrates",
+    ),
+    "lanes_agree_frames": (
+        ("many frames' lanes do not fit the clip's static camera: lines were misread, or the broadcast"
+         " cut to another camera"),
+        "check the lane overlays frame by frame; cut the clip to one camera shot",
+    ),
+    "R-hat": (
+        "the sampler did not converge: the bands are not a posterior yet",
+        "run with more --max-steps",
+    ),
+    "ESS": (
+        "too few independent posterior draws of the camera height",
+        "run with more --max-steps",
+    ),
+    "posterior multimodal": (
+        "two different camera heights explain the clip; the median lies between them",
+        "give the camera height (--height-m) or the athlete's stature (--stature) if known",
+    ),
+    "prior-dominated height": (
+        "the clip did not measure the camera height; every metric number rests on the prior",
+        "give the camera height (--height-m) or the athlete's stature (--stature)",
+    ),
+    "height barely fixes the camera": (
+        ("the camera sits where a small change of height is a large change of focal length and "
+         "distance: positions and speeds are loose"),
+        "give the athlete's stature (--stature) or the camera height (--height-m)",
+    ),
+    "camera_side evidence ratio": (
+        "which side of the track the camera stands on is not settled by the motion",
+        "give it (--camera-side main or far) if you know it",
+    ),
+    "branch evidence ratio": (
+        ("a far camera with a long lens and a close one looking down steeply explain the lanes about "
+         "equally well: the scale of everything hangs on the choice"),
+        "give --branch narrow or wide, or the camera height, if known",
+    ),
+    "bone length cv": (
+        "cameras and skeleton do not fit together (rays miss their limb spheres, draws disagree)",
+        "check the keypoints and the lane overlays",
+    ),
+    "running speed": (
+        "the athlete runs faster than any human: the camera puts them at the wrong scale",
+        "check the lane overlays; give the camera height or the stature if known",
+    ),
+    "stature prior conflict": (
+        "the stature left its prior far behind: the camera makes the limbs the wrong size",
+        "check the lane overlays; give the athlete's stature (--stature) if known",
+    ),
+    "keypoint noise unidentified": (
+        ("the 2D detections' noise drifts too slowly to be measured: the smoothing and the bands rest "
+         "on a guessed level"),
+        "use a better 2D pose model",
+    ),
+    "knee band wide": (
+        "the knee bands are too wide to measure the knee at the ~3 deg kinematics needs",
+        "give the camera height or the stature if known; use a clip from a nearer camera",
+    ),
+    "no plausible camera": (
+        ("the lanes allow no camera that the priors and the limbs accept (e.g. spurious lines of a "
+         "grazing view)"),
+        ("check the lane overlays; widen the camera-height prior (--height-m, --height-log-sd) if the "
+         "camera is unusual"),
+    ),
+    "lanes ": (
+        "how many frames ended with this lane status (run.json frame_status, described in the README)",
+        "frames without the straight's lines cannot calibrate",
+    ),
+    "oblique view": (
+        ("the camera looks at the runner from far off the side: much of the legs' motion runs along "
+         "the rays, and knee errors average ~4 deg even with the true camera"),
+        "prefer a camera nearer the side of the runner (a main-stand or long-lens view)",
+    ),
+}
+
+
+def explain_reason(reason):
+    """``(meaning, what to do)`` of a verdict reason (:data:`REASON_HELP`), or None for a reason
+    it does not know.
+
+    >>> explain_reason("oblique view (48 deg from the side)")[1]
+    'prefer a camera nearer the side of the runner (a main-stand or long-lens view)'
+    >>> explain_reason("something else") is None
+    True
+    """
+    for key in sorted(REASON_HELP, key=len, reverse=True):
+        if str(reason).startswith(key):
+            return REASON_HELP[key]
+    return None
 
 
 @dataclass(frozen=True)

@@ -102,6 +102,14 @@ class HtmlReport:
         return Path(path)
 
 
+def _explain_reasons(rep, reasons):
+    """A table of the verdict's reasons with what each means and what can be done about it."""
+    from ..inference.verdict import explain_reason
+
+    rows = [(r, *(explain_reason(r) or ("", ""))) for r in reasons]
+    rep.table(["reason", "what it means", "what you can do"], rows)
+
+
 def draw_skeleton(img, joints_px, color=(0, 255, 255), thickness=2):
     """Draw an H36M-17 skeleton (F=1, 17, 2+) on a BGR image in place; NaN joints are skipped."""
     p = np.asarray(joints_px, float)
@@ -265,9 +273,12 @@ def run_report(out_html, clip, result, joints_median, cameras, rendered=None):
         rep.paragraph(f"Verdict: {result.verdict}. " + "; ".join(result.verdict_reasons)
                       + ". The results below are written for inspection; do not use them as they stand "
                       "(run.json lists the reasons).", cls="banner")
+        _explain_reasons(rep, result.verdict_reasons)
     else:
-        rep.paragraph("Verdict: ok (none of probreg's checks on this clip failed: calibrated frames, sampler "
-                      "convergence, posterior shape, camera side, bone-length consistency).", cls="ok")
+        rep.paragraph("Verdict: ok (none of probreg's checks on this clip failed: calibrated frames, lanes that "
+                      "fit the camera, sampler convergence, posterior shape, camera side and family branch, "
+                      "bone lengths, speed and stature, keypoint noise, knee band width, the view's angle).",
+                      cls="ok")
     side = getattr(result, "camera_side", None)
     if side is not None:
         rep.paragraph(f"Camera side: {side.chosen} ({side.source}; log-evidence ratio {side.log_ratio:.1f} "
@@ -374,6 +385,7 @@ def uncalibrated_report(out_html, clip, registration, result):
     rep.paragraph("Verdict: uncalibrated. " + "; ".join(result.verdict_reasons)
                   + ". No frame gave a camera, so nothing was estimated: the angle and joint files hold NaN "
                   "(run.json lists every frame's lane status).", cls="banner")
+    _explain_reasons(rep, result.verdict_reasons)
     rep.heading("Lane status of the frames")
     counts = registration.status_counts()
     rep.table(["status", "frames"], [[k, v] for k, v in sorted(counts.items(), key=lambda kv: -kv[1])],

@@ -254,3 +254,28 @@ def test_an_oblique_view_is_unreliable(obliquity, flagged):
     assert (verdict == "unreliable") == flagged
     assert reasons == ([f"oblique view ({obliquity:.0f} deg from the side)"] if flagged else [])
     assert clip_verdict(**GOOD, obliquity_deg=float("nan")) == ("ok", [])
+
+
+def test_every_reason_the_verdict_gives_is_explained():
+    from probreg.inference.evidence import BranchChoice
+    from probreg.inference.verdict import explain_reason
+
+    side = _side(0.5, -0.2)
+    branch = BranchChoice("narrow", "evidence", {"narrow": -10.0, "wide": -11.0})
+    rng = np.random.default_rng(3)
+    _, reasons = clip_verdict(
+        100, 10, 0, rhat=1.3, ess=40, log_height_draws=np.r_[rng.normal(1.0, 0.02, 500), rng.normal(1.6, 0.02, 500)],
+        log_height_prior_sd=0.05, side=side, bone_cv_pct={"shank": 40.0}, speed_mps=30.0,
+        stature_draws=np.full(50, 3.0), stature_prior=type("P", (), {"mean": 1.8, "sd": 0.16})(),
+        member_sensitivity=float("inf"), lanes_agree=(10, 100), noise_rho=0.9, knee_band_deg=50.0,
+        obliquity_deg=60.0, branch=branch)
+    # every check fires once (ESS and multimodality from the same draws)
+    starts = ("frames_with_angles", "calibrated_frames", "lanes_agree_frames", "R-hat", "ESS",
+              "posterior multimodal", "prior-dominated height", "height barely fixes the camera",
+              "camera_side evidence ratio", "branch evidence ratio", "bone length cv", "running speed",
+              "stature prior conflict", "keypoint noise unidentified", "knee band wide", "oblique view")
+    assert [next(r for r in reasons if r.startswith(k)) for k in starts]
+    for r in reasons + ["no plausible camera (...)", "lanes no_lines 40/40"]:
+        meaning, todo = explain_reason(r)
+        assert meaning and todo
+    assert explain_reason("not a reason") is None

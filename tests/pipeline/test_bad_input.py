@@ -295,7 +295,10 @@ def test_run_with_no_frame_calibrated_writes_an_uncalibrated_result(clip, tmp_pa
     assert np.load(out / "joints3d.npz")["median"].shape == (40, 17, 3)
     assert np.all(np.isnan(np.load(out / "joints3d.npz")["median"]))
     assert all(f["K"] is None for f in json.loads((out / "camera.json").read_text())["frames"])
-    assert "Verdict: uncalibrated" in (out / "report.html").read_text(encoding="utf-8")
+    report = (out / "report.html").read_text(encoding="utf-8")
+    assert "Verdict: uncalibrated" in report
+    # each reason with what it means and what to do
+    assert "<th>what it means</th>" in report and "frames without the straight&#x27;s lines cannot calibrate" in report
 
 
 # ----------------------------------------------------------------------------- 6. late checks, leftovers, interrupts
