@@ -257,6 +257,7 @@ def test_an_oblique_view_is_unreliable(obliquity, flagged):
 
 
 def test_every_reason_the_verdict_gives_is_explained():
+    from probreg.inference import NormalPrior
     from probreg.inference.evidence import BranchChoice
     from probreg.inference.verdict import explain_reason
 
@@ -266,7 +267,7 @@ def test_every_reason_the_verdict_gives_is_explained():
     _, reasons = clip_verdict(
         100, 10, 0, rhat=1.3, ess=40, log_height_draws=np.r_[rng.normal(1.0, 0.02, 500), rng.normal(1.6, 0.02, 500)],
         log_height_prior_sd=0.05, side=side, bone_cv_pct={"shank": 40.0}, speed_mps=30.0,
-        stature_draws=np.full(50, 3.0), stature_prior=type("P", (), {"mean": 1.8, "sd": 0.16})(),
+        stature_draws=np.full(50, 3.0), stature_prior=NormalPrior(1.80, 0.16),
         member_sensitivity=float("inf"), lanes_agree=(10, 100), noise_rho=0.9, knee_band_deg=50.0,
         obliquity_deg=60.0, branch=branch)
     # every check fires once (ESS and multimodality from the same draws)
