@@ -118,33 +118,6 @@ def _null_vector_2(M):
     return v, smallest / np.maximum(np.sqrt(np.maximum(lam_max, 0.0)), 1e-300)
 
 
-def members_on_grid(families, focal_px, chunk=64):
-    """:meth:`CalibrationFamily.members` of many families at the same focal lengths, batched
-    (families with the same number of lines ``chunk`` at a time): ``{key: members}`` for a
-    ``{key: family}`` mapping.  The same numbers as one call per family, at a fraction of the
-    cost for a clip's frames (one vectorised pass instead of a Python call per frame).
-
-    >>> fams = {k: CalibrationFamily.from_camera(Camera.look_at([30, -60, h], [30, -4, 0], fov_deg=12.0),
-    ...                                          line_indices=range(1, 6)) for k, h in (("a", 15.0), ("b", 9.0))}
-    >>> f = np.geomspace(300.0, 30000.0, 9)
-    >>> batched = members_on_grid(fams, f)
-    >>> all(np.array_equal(batched[k][n], v, equal_nan=True) for k in fams for n, v in fams[k].members(f).items())
-    True
-    """
-    f = np.atleast_1d(np.asarray(focal_px, float))
-    groups = {}
-    for key, fam in families.items():
-        groups.setdefault(len(fam.lines), []).append(key)
-    out = {}
-    for keys in groups.values():
-        for start in range(0, len(keys), chunk):
-            part = keys[start:start + chunk]
-            mm = _members_batch([families[k] for k in part], np.broadcast_to(f, (len(part), len(f))))
-            for r, k in enumerate(part):
-                out[k] = {name: v[r] for name, v in mm.items()}
-    return out
-
-
 def _members_batch(fams, focal_px):
     """:meth:`CalibrationFamily.members` of several families with the same number of lines
     at once: ``focal_px`` (B, m), one row per family; arrays with leading shape (B, m).

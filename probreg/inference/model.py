@@ -53,7 +53,6 @@ import warnings
 
 import numpy as np
 
-from ..calibration.family import members_on_grid
 from ..calibration.registration import (
     ClipRegistration,
     _zoom_outliers,
@@ -222,7 +221,9 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self.valid = np.array([f is not None for f in fams])
         self.inconsistent = np.zeros(self.F, bool)  # lanes found, family off the zoom path
         w = self.reg.image_size[0]
-        self.logf, self.h, self.y = (np.full((self.F, n), np.nan) for _ in range(3))
+        self.logf = np.full((self.F, n), np.nan)
+        self.h = np.full((self.F, n), np.nan)
+        self.y = np.full((self.F, n), np.nan)
         self.R = np.full((self.F, n, 3, 3), np.nan)
         self.pp = np.tile([(self.reg.image_size[0] - 1) / 2, (self.reg.image_size[1] - 1) / 2], (self.F, 1))
         self.flip = np.zeros(self.F, bool)
@@ -237,8 +238,8 @@ class ClipModel(DrawPropagation, EmceeSampling):
             parts = fork_map(lambda idx: {i: self._members(i, fams[i], fgrid) for i in idx},
                               [frames[j::k] for j in range(k)])
             members = {i: m for part in parts for i, m in part.items()}
-        else:  # the frames' families batched (one vectorised pass, not a call per frame)
-            members = members_on_grid({i: fams[i] for i in frames}, fgrid)
+        else:
+            members = {i: self._members(i, fams[i], fgrid) for i in frames}
         for i in frames:
             fam = fams[i]
             m = members[i]

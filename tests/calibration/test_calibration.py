@@ -178,29 +178,3 @@ def test_a_bracket_that_does_not_hold_is_no_member_not_a_scipy_error():
 
     with pytest.raises(CalibrationError, match="does not hold"):
         HeightParameter().focal_for(Flaky(), 25.0)
-
-
-def test_members_on_grid_equals_one_call_per_family():
-    """The batched members of many families (different line counts, split over chunks) are the
-    numbers of one ``members`` call per family, bit for bit."""
-    from probreg.calibration.family import members_on_grid
-
-    fams = {}
-    for i, (name, (C, T, fov, roll, _)) in enumerate(sorted(CASES.items())):
-        cam = Camera.look_at(C, T, fov_deg=fov, roll_deg=roll)
-        fams[name] = CalibrationFamily.from_camera(cam, line_indices=range(1, 4 + i % 3))
-    f = np.geomspace(200.0, 40000.0, 31)
-    for chunk in (1, 2, 64):
-        batched = members_on_grid(fams, f, chunk=chunk)
-        assert set(batched) == set(fams)
-        for name, fam in fams.items():
-            one = fam.members(f)
-            assert set(batched[name]) == set(one)
-            for key, value in one.items():
-                np.testing.assert_array_equal(batched[name][key], value)
-    # the true camera is a member: its height is on the batched curve
-    name = "typical"
-    C, T, fov, roll, _ = CASES[name]
-    f_true = Camera.look_at(C, T, fov_deg=fov, roll_deg=roll).focal_px
-    m = members_on_grid({name: fams[name]}, [f_true])[name]
-    assert m["valid"][0] and abs(m["height_m"][0] - C[2]) < 1e-6
