@@ -43,7 +43,7 @@ from .inference.heights import HEIGHT_SYSTEMATIC_SD
 from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationError
 from .inference.sampling import SamplerSettings
 from .inference.evidence import BRANCHES, BranchChoice, laplace_log_evidence
-from .inference.verdict import bone_length_cv, clip_verdict, knee_band_width, view_obliquity
+from .inference.verdict import bone_length_cv, clip_verdict, knee_band_width, knee_flexion_peak, view_obliquity
 from .inference.parallel import default_workers, fork_call
 from .io.clip import FPS_RANGE, ClipFormatError, load_clip, write_json
 from .io.frames import has_frames
@@ -454,6 +454,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
               for i, c in enumerate(cam_list)]
     agree = (status.count("ok"), sum(status.count(k) for k in ("ok", "bridged_no_member", "bridged_inconsistent")))
     diag["view_obliquity_deg"] = obliquity = view_obliquity(cam_list, joints_med)
+    diag["knee_flexion_peak_deg"] = knee_peak = knee_flexion_peak(summ, clip.fps)
     verdict, reasons = clip_verdict(
         clip.n_frames, calibrated=sum(c is not None for c in cam_list), frames_with_angles=n_angle,
         rhat=diag["rhat_height"], ess=diag["ess_height"], log_height_draws=flat[:, 0],
@@ -461,7 +462,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         speed_mps=gait_s.get("speed_mps", {}).get("median"),
         stature_draws=flat[:, 1], stature_prior=options.priors.stature, branch=branch,
         member_sensitivity=sensitivity, lanes_agree=agree, noise_rho=model.noise_rho,
-        knee_band_deg=knee_band_width(summ), obliquity_deg=obliquity)
+        knee_band_deg=knee_band_width(summ), obliquity_deg=obliquity, knee_peak_deg=knee_peak)
     result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
                        gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
                        verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,

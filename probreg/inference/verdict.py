@@ -112,6 +112,22 @@ reason of its own, a short machine-readable string with the number that triggere
     within 29° had knee errors of 3.2° on average (true camera 3.2°), the 15 from 35-64° 4.3°
     (4.0°); of those 15, 13 were flagged for other reasons already, and of the two flagged for
     this alone one had 7.0° (a wide near view seen from 37°), the other 3.3° (45°).)
+``knee flexion peak x deg``
+    the knees never bend as a running stride bends them: the 95th percentile of both knees'
+    flexion (the posterior median of every frame, :func:`knee_flexion_peak`) stays below
+    :attr:`VerdictThresholds.min_knee_peak_deg`, 80°, over a clip with at least a second of knee
+    angles (more than a stride, so the swing of each leg is in it).  The swing leg of a runner
+    folds the knee to 90-130° (slow jogging to sprinting; 103-120° in the CMU running capture of
+    ``shared/data/mocap``), so a clip that shows no such peak did not measure the legs: the 2D
+    keypoints do not follow the bent knee (a pose model that straightens the swing leg, or places
+    the ankle up the shin), or the athlete is not running.  Nothing else in the run sees this:
+    such keypoints can be smooth and steady, the noise model finds little noise, and the bands
+    are narrow around wrong curves.  (Found with a real pose model, ``yolo11n-pose``, on probreg's
+    own renders of the tuning twin of the held-out set, seeds 7501-7520: knee errors of 22-48°,
+    eight of the 18 calibrated clips ``ok`` with bands covering 27-44 %; their knee peaks were
+    35-73°.  The same set-ups with the generator's keypoints (seeds 7501-7540, 8101-8140, 79
+    calibrated clips) peaked at 92-133°.  The limit is the jogging floor with a margin for the
+    lifting's error, and it lies in that gap.)
 """
 
 from __future__ import annotations
@@ -123,7 +139,8 @@ import numpy as np
 from ..filtering.basic import NOISE_RHO_MAX
 from ..geometry import JOINT_INDEX
 
-__all__ = ["VerdictThresholds", "clip_verdict", "bone_length_cv", "knee_band_width", "posterior_modes",
+__all__ = ["VerdictThresholds", "clip_verdict", "bone_length_cv", "knee_band_width", "knee_flexion_peak",
+           "posterior_modes",
            "view_obliquity", "REASON_HELP", "explain_reason"]
 
 _LIMBS = {"thigh": ("hip", "knee"), "shank": ("knee", "ankle"), "upper_arm": ("shoulder", "elbow"),
@@ -207,6 +224,11 @@ REASON_HELP = {
         "how many frames ended with this lane status (run.json frame_status, described in the README)",
         "frames without the straight's lines cannot calibrate",
     ),
+    "knee flexion peak": (
+        ("the knees never bend as a runner's swing leg does (90-130 deg): the 2D keypoints do not follow "
+         "the legs, or the athlete is not running"),
+        "look at the keypoints on the frames; use a stronger 2D pose model",
+    ),
     "oblique view": (
         ("the camera looks at the runner from far off the side: much of the legs' motion runs along "
          "the rays, and knee errors average ~4 deg even with the true camera"),
@@ -248,6 +270,7 @@ class VerdictThresholds:
     max_noise_rho: float = NOISE_RHO_MAX
     max_knee_band_deg: float = 35.0
     max_obliquity_deg: float = 35.0
+    min_knee_peak_deg: float = 80.0
 
 
 def bone_length_cv(joints_track_m):
@@ -331,6 +354,32 @@ def knee_band_width(angle_summary):
     return float(np.mean(w)) if len(w) else float("nan")
 
 
+def knee_flexion_peak(angle_summary, fps, min_seconds=1.0, q=95.0):
+    """How far the knees bend at the peak of the clip: the ``q``-th percentile (deg) of both knees'
+    per-frame flexion (the medians of a band summary ``{name: (median, lo, hi)}``,
+    :func:`probreg.inference.angle_bands`); NaN when fewer than ``min_seconds`` of frames have a
+    knee angle (a clip shorter than a stride need not show a swing).
+
+    >>> t = np.arange(100) / 50.0
+    >>> swing = 60 + 50 * np.sin(2 * np.pi * 1.4 * t)          # a runner's knee: 10-110 deg
+    >>> round(knee_flexion_peak({"knee_l": (swing, swing, swing), "knee_r": (swing, swing, swing)}, 50.0))
+    109
+    >>> knee_flexion_peak({"knee_l": (swing[:30],) * 3}, 50.0)  # 0.6 s: too short to say
+    nan
+    """
+    parts = [np.ravel(np.asarray(angle_summary[k][0], float)) for k in ("knee_l", "knee_r") if k in angle_summary]
+    if not parts:
+        return float("nan")
+    seen = np.zeros(max(len(p) for p in parts), bool)
+    for p in parts:
+        seen[:len(p)] |= np.isfinite(p)
+    vals = np.concatenate(parts)
+    vals = vals[np.isfinite(vals)]
+    if seen.sum() < min_seconds * float(fps) or not len(vals):
+        return float("nan")
+    return float(np.percentile(vals, q))
+
+
 def posterior_modes(samples, min_rel_height=0.1, max_dip=0.5, n_grid=512, ess=None):
     """Locations of the separate modes of a 1-D posterior sample (Gaussian kernel density).
 
@@ -378,7 +427,7 @@ def posterior_modes(samples, min_rel_height=0.1, max_dip=0.5, n_grid=512, ess=No
 def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, log_height_draws=None,
                  log_height_prior_sd=None, side=None, bone_cv_pct=None, speed_mps=None,
                  stature_draws=None, stature_prior=None, branch=None, member_sensitivity=None,
-                 lanes_agree=None, noise_rho=None, knee_band_deg=None, obliquity_deg=None,
+                 lanes_agree=None, noise_rho=None, knee_band_deg=None, obliquity_deg=None, knee_peak_deg=None,
                  thresholds: VerdictThresholds = VerdictThresholds()):
     """The clip verdict and its reasons.
 
@@ -420,6 +469,8 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
         The knees' mean 90 % band width (:func:`knee_band_width`).
     obliquity_deg : float, optional
         How far the camera looks away from the runner's side (:func:`view_obliquity`).
+    knee_peak_deg : float, optional
+        The knees' flexion peak (:func:`knee_flexion_peak`).
 
     Returns
     -------
@@ -441,6 +492,8 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
     ('unreliable', ['knee band wide (mean 90 % band 41.8 deg)'])
     >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, obliquity_deg=48.4)
     ('unreliable', ['oblique view (48 deg from the side)'])
+    >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, knee_peak_deg=56.2)
+    ('unreliable', ['knee flexion peak 56 deg'])
     """
     t = thresholds
     reasons, uncal = [], False
@@ -496,5 +549,7 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
         reasons.append(f"knee band wide (mean 90 % band {knee_band_deg:.1f} deg)")
     if obliquity_deg is not None and np.isfinite(obliquity_deg) and obliquity_deg > t.max_obliquity_deg:
         reasons.append(f"oblique view ({obliquity_deg:.0f} deg from the side)")
+    if knee_peak_deg is not None and np.isfinite(knee_peak_deg) and knee_peak_deg < t.min_knee_peak_deg:
+        reasons.append(f"knee flexion peak {knee_peak_deg:.0f} deg")
     verdict = "uncalibrated" if uncal else ("unreliable" if reasons else "ok")
     return verdict, reasons

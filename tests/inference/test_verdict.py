@@ -269,14 +269,74 @@ def test_every_reason_the_verdict_gives_is_explained():
         log_height_prior_sd=0.05, side=side, bone_cv_pct={"shank": 40.0}, speed_mps=30.0,
         stature_draws=np.full(50, 3.0), stature_prior=NormalPrior(1.80, 0.16),
         member_sensitivity=float("inf"), lanes_agree=(10, 100), noise_rho=0.9, knee_band_deg=50.0,
-        obliquity_deg=60.0, branch=branch)
+        obliquity_deg=60.0, knee_peak_deg=40.0, branch=branch)
     # every check fires once (ESS and multimodality from the same draws)
     starts = ("frames_with_angles", "calibrated_frames", "lanes_agree_frames", "R-hat", "ESS",
               "posterior multimodal", "prior-dominated height", "height barely fixes the camera",
               "camera_side evidence ratio", "branch evidence ratio", "bone length cv", "running speed",
-              "stature prior conflict", "keypoint noise unidentified", "knee band wide", "oblique view")
+              "stature prior conflict", "keypoint noise unidentified", "knee band wide", "oblique view",
+              "knee flexion peak")
     assert [next(r for r in reasons if r.startswith(k)) for k in starts]
+    assert len(reasons) == len(starts)
     for r in reasons + ["no plausible camera (...)", "lanes no_lines 40/40"]:
         meaning, todo = explain_reason(r)
         assert meaning and todo
     assert explain_reason("not a reason") is None
+
+
+def _knees(peak, low=10.0, n=100, fps=50.0, cadence_hz=1.4):
+    """Both knees of a runner whose flexion swings between ``low`` and ``peak`` deg, half a stride
+    apart: a band summary as :func:`probreg.inference.angle_bands` gives it (median, lo, hi)."""
+    t = np.arange(n) / fps
+    out = {}
+    for name, phase in (("knee_l", 0.0), ("knee_r", np.pi)):
+        k = low + (peak - low) * 0.5 * (1 + np.sin(2 * np.pi * cadence_hz * t + phase))
+        out[name] = (k, k - 5, k + 5)
+    return out
+
+
+def test_knee_flexion_peak_known_answers():
+    from probreg.inference.verdict import knee_flexion_peak
+
+    # the 95th percentile of a sinusoid between 10 and 110 deg: 10 + 100 (1 + sin(0.45 pi)) / 2
+    want = 10 + 100 * 0.5 * (1 + np.sin(0.45 * np.pi))
+    assert knee_flexion_peak(_knees(110.0), 50.0) == pytest.approx(want, abs=0.5)
+    assert knee_flexion_peak(_knees(60.0), 50.0) == pytest.approx(10 + 50 * 0.5 * (1 + np.sin(0.45 * np.pi)), abs=0.5)
+    # frames without a knee angle do not count; one knee alone is enough
+    knees = _knees(110.0)
+    gappy = {k: tuple(np.where(np.arange(100) % 4 == 0, np.nan, a) for a in v) for k, v in knees.items()}
+    assert knee_flexion_peak(gappy, 50.0) == pytest.approx(want, abs=2.0)
+    assert knee_flexion_peak({"knee_l": knees["knee_l"]}, 50.0) == pytest.approx(want, abs=0.5)
+    # under a second of knee angles (here 0.8 s at 50 fps, 1.6 s at 25 fps): too short at 50 fps
+    short = {k: tuple(a[:40] for a in v) for k, v in knees.items()}
+    assert np.isnan(knee_flexion_peak(short, 50.0)) and np.isfinite(knee_flexion_peak(short, 25.0))
+    assert np.isnan(knee_flexion_peak({"hip_l": knees["knee_l"]}, 50.0))
+
+
+@pytest.mark.parametrize("peak, flagged", [(120.0, False), (85.0, False), (60.0, True), (35.0, True)])
+def test_knees_that_never_bend_as_a_runners_do_are_unreliable(peak, flagged):
+    from probreg.inference.verdict import knee_flexion_peak
+
+    value = knee_flexion_peak(_knees(peak), 50.0)
+    verdict, reasons = clip_verdict(**GOOD, knee_peak_deg=value)
+    assert (verdict == "unreliable") == flagged
+    assert reasons == ([f"knee flexion peak {value:.0f} deg"] if flagged else [])
+    assert clip_verdict(**GOOD, knee_peak_deg=float("nan")) == ("ok", [])
+
+
+def test_real_running_and_the_generators_runner_bend_the_knee_beyond_the_limit(shared_data):
+    """The limit's premise: every real run of the CMU capture (7 runs, 4 subjects, 2.6-4.2 m/s) and
+    probreg's own runner peak well above 80 deg."""
+    from probreg.geometry.skeleton import joint_angles
+    from probreg.inference.verdict import VerdictThresholds, knee_flexion_peak
+    from probreg.sim import config_from_preset, synthesize
+
+    limit = VerdictThresholds().min_knee_peak_deg
+    for path in sorted((shared_data / "mocap").glob("*.npz")):
+        d = np.load(path)
+        a = joint_angles(d["joints3d"])
+        peak = knee_flexion_peak({k: (np.asarray(a[k]),) * 3 for k in ("knee_l", "knee_r")}, float(d["fps"]))
+        assert peak > limit + 15, (path.name, peak)
+    clip = synthesize(config_from_preset("run", 3, n_frames=100), seed=3, preset="run")
+    a = joint_angles(clip.motion.joints_track_m)
+    assert knee_flexion_peak({k: (np.asarray(a[k]),) * 3 for k in ("knee_l", "knee_r")}, clip.config.fps) > limit + 15
