@@ -123,9 +123,8 @@ reason of its own, a short machine-readable string with the number that triggere
     the ankle up the shin), or the athlete is not running.  Nothing else in the run sees this:
     such keypoints can be smooth and steady, the noise model finds little noise, and the bands
     are narrow around wrong curves.  (Found with a real pose model, ``yolo11n-pose``, on probreg's
-    own renders of the tuning twin of the held-out set, seeds 7501-7520: knee errors of 22-48°,
-    eight of the 18 calibrated clips ``ok`` with bands covering 27-44 %; their knee peaks were
-    35-73°.  The same set-ups with the generator's keypoints (seeds 7501-7540, 8101-8140, 79
+    own renders of the tuning twin of the held-out set, seeds 7501-7520: knee errors of 22-48°
+    in 19 runs, eight of them ``ok`` with bands covering 27-45 %; their knee peaks were 35-73°.  The same set-ups with the generator's keypoints (seeds 7501-7540, 8101-8140, 79
     calibrated clips) peaked at 92-133°.  The limit is the jogging floor with a margin for the
     lifting's error, and it lies in that gap.)
 """
