@@ -177,8 +177,7 @@ def _diagnostics(sampler, tau, idata, names=PARAM_NAMES):
     az = _arviz()
 
     post = idata.posterior[["log_height", "stature"]]
-    ess = az.ess(post)
-    rhat = az.rhat(post)
+    ess, rhat = az.ess(post), az.rhat(post)
     return {
         "acceptance_fraction": float(np.mean(sampler.acceptance_fraction)),
         "tau": {n: float(t) for n, t in zip(names, tau)},
@@ -239,8 +238,7 @@ def _write_uncalibrated(clip, reg, side, out_dir, options, error, t0, log, input
 
     out_dir = Path(out_dir)
     F = clip.n_frames
-    counts = reg.status_counts()
-    message = str(error)
+    counts, message = reg.status_counts(), str(error)
     reasons = [f"calibrated_frames 0/{F}", f"frames_with_angles 0/{F}"] + (
         [f"no plausible camera ({message})"] if error.reason in ("no_plausible_height", "no_finite_posterior")
         else []) + [
@@ -455,6 +453,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     agree = (status.count("ok"), sum(status.count(k) for k in ("ok", "bridged_no_member", "bridged_inconsistent")))
     diag["view_obliquity_deg"] = obliquity = view_obliquity(cam_list, joints_med)
     diag["knee_flexion_peak_deg"] = knee_peak = knee_flexion_peak(summ, clip.fps)
+    diag["left_right_exchanged"] = exchanged = {"legs": float(model.exchanged[:, 0].mean())}  # the arms: never
     verdict, reasons = clip_verdict(
         clip.n_frames, calibrated=sum(c is not None for c in cam_list), frames_with_angles=n_angle,
         rhat=diag["rhat_height"], ess=diag["ess_height"], log_height_draws=flat[:, 0],
@@ -462,7 +461,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         speed_mps=gait_s.get("speed_mps", {}).get("median"),
         stature_draws=flat[:, 1], stature_prior=options.priors.stature, branch=branch,
         member_sensitivity=sensitivity, lanes_agree=agree, noise_rho=model.noise_rho,
-        knee_band_deg=knee_band_width(summ), obliquity_deg=obliquity, knee_peak_deg=knee_peak)
+        knee_band_deg=knee_band_width(summ), obliquity_deg=obliquity, knee_peak_deg=knee_peak,
+        left_right_exchanged=exchanged)
     result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
                        gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
                        verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,

@@ -15,6 +15,7 @@ from .basic import (
     noise_model,
 )
 from .clean import clean_keypoints, detection_status
+from .identity import relabel_left_right
 from .pair import periodic_smooth_pair
 from .periodic import (
     periodic_smooth,
@@ -28,5 +29,5 @@ __all__ = [
     "hampel", "fill_gaps", "butterworth", "clean_keypoints", "detection_status", "keypoint_noise_px", "noise_model",
     "keypoints_noisy", "leg_length_px", "NOISE_FLOOR_PX", "NOISE_FLOOR_LEG_FRAC",
     "periodic_smooth", "periodic_smooth_pair", "periodic_smooth_series", "score_noise_scale", "stride_lags",
-    "stride_period_frames",
+    "stride_period_frames", "relabel_left_right",
 ]

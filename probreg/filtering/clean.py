@@ -14,6 +14,7 @@ from .basic import (
     keypoints_noisy,
     noise_model,
 )
+from .identity import relabel_left_right
 from .periodic import periodic_smooth
 
 __all__ = ["clean_keypoints", "detection_status"]
@@ -21,7 +22,8 @@ __all__ = ["clean_keypoints", "detection_status"]
 
 def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=3.0, max_gap=10,
                     noise_floor_px=NOISE_FLOOR_PX, noise_floor_leg_frac=NOISE_FLOOR_LEG_FRAC):
-    """Hampel outlier rejection, short-gap filling and zero-phase low-pass of every coordinate.
+    """Left/right labels repaired from the motion, then Hampel outlier rejection, short-gap filling
+    and zero-phase low-pass of every coordinate.
 
     Parameters
     ----------
@@ -43,6 +45,10 @@ def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=
     """
     kp = np.asarray(keypoints_px, float)
     noise = noise_model(kp)[0] if kp.shape[1] == 17 else np.inf
+    if kp.shape[1] == 17 and np.isfinite(noise):
+        # legs and arms whose left/right labels the detector got the wrong way round for some
+        # frames are set right first (:func:`probreg.filtering.relabel_left_right`)
+        kp = relabel_left_right(kp, noise)[0]
     noisy = keypoints_noisy(kp, noise, noise_floor_px, noise_floor_leg_frac)
     periodic = cutoff_hz == "auto" and noisy
     if cutoff_hz == "auto":

@@ -60,7 +60,7 @@ from ..calibration.registration import (
     glitch_vote,
     lane_anchor_shift,
 )
-from ..filtering import clean_keypoints, keypoints_noisy, noise_model, stride_lags
+from ..filtering import clean_keypoints, keypoints_noisy, noise_model, relabel_left_right, stride_lags
 from ..geometry import JOINT_INDEX, SEGMENT_BONES
 from ..geometry.rays import CameraArrays, _as_list
 from ..lifting import LiftConfig
@@ -152,9 +152,10 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self.priors = priors
         self.dist = None if dist is None else np.asarray(dist, float)
         self.athlete_lane = athlete_lane
-        self.raw = np.asarray(keypoints_px, float)
+        self.noise_sd, self.noise_rho = noise_model(np.asarray(keypoints_px, float))
+        # left/right labels set right from the motion, in the raw keypoints too (the bootstrap's residuals)
+        self.raw, self.exchanged = relabel_left_right(np.asarray(keypoints_px, float), self.noise_sd)
         self.kp = clean_keypoints(self.raw, self.fps)
-        self.noise_sd, self.noise_rho = noise_model(self.raw)
         self.F = len(self.kp)
         # stride timing for the cross-stride angle smoothing of every lifting (None: no
         # repeating strides, or keypoints too clean to need it -- as in lift()'s "auto")
@@ -221,9 +222,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self.valid = np.array([f is not None for f in fams])
         self.inconsistent = np.zeros(self.F, bool)  # lanes found, family off the zoom path
         w = self.reg.image_size[0]
-        self.logf = np.full((self.F, n), np.nan)
-        self.h = np.full((self.F, n), np.nan)
-        self.y = np.full((self.F, n), np.nan)
+        self.logf, self.h, self.y = (np.full((self.F, n), np.nan) for _ in range(3))
         self.R = np.full((self.F, n, 3, 3), np.nan)
         self.pp = np.tile([(self.reg.image_size[0] - 1) / 2, (self.reg.image_size[1] - 1) / 2], (self.F, 1))
         self.flip = np.zeros(self.F, bool)

@@ -127,6 +127,17 @@ reason of its own, a short machine-readable string with the number that triggere
     in 19 runs, eight of them ``ok`` with bands covering 27-45 %; their knee peaks were 35-73°.  The same set-ups with the generator's keypoints (seeds 7501-7540, 8101-8140, 79
     calibrated clips) peaked at 92-133°.  The limit is the jogging floor with a margin for the
     lifting's error, and it lies in that gap.)
+``left/right labels unsure (legs exchanged in x % of frames)``
+    the keypoints' left/right labels were set right from the motion
+    (:func:`probreg.filtering.relabel_left_right`): where the detector gave a leg the other
+    side's label for some frames, the whole leg's labels are exchanged there.  What
+    the motion gives is which keypoints belong to one leg; which of the two legs is the left one
+    comes from the detector's labels, taken where most frames agree.  When the labels had to be
+    exchanged in more than :attr:`VerdictThresholds.max_exchanged_fraction` (a third) of the
+    frames, the detector agreed with that choice in fewer than two frames of three: which leg is
+    called left is then close to a guess, and the left and right angles may be each other's.
+    (Probreg's generator swaps single frames, 0.3 %; the validation clips about 1 %.  A real pose
+    model on probreg's renders of tuning set-ups swapped 30-60 % of the frames.)
 """
 
 from __future__ import annotations
@@ -228,6 +239,11 @@ REASON_HELP = {
          "the legs, or the athlete is not running"),
         "look at the keypoints on the frames; use a stronger 2D pose model",
     ),
+    "left/right labels unsure": (
+        ("the 2D detector often called the left leg right: probreg set the labels right from the "
+         "motion, but which leg is the left one is close to a guess"),
+        "compare the left and right curves with the video; use a stronger 2D pose model",
+    ),
     "oblique view": (
         ("the camera looks at the runner from far off the side: much of the legs' motion runs along "
          "the rays, and knee errors average ~4 deg even with the true camera"),
@@ -270,6 +286,7 @@ class VerdictThresholds:
     max_knee_band_deg: float = 35.0
     max_obliquity_deg: float = 35.0
     min_knee_peak_deg: float = 80.0
+    max_exchanged_fraction: float = 1.0 / 3.0
 
 
 def bone_length_cv(joints_track_m):
@@ -427,7 +444,7 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
                  log_height_prior_sd=None, side=None, bone_cv_pct=None, speed_mps=None,
                  stature_draws=None, stature_prior=None, branch=None, member_sensitivity=None,
                  lanes_agree=None, noise_rho=None, knee_band_deg=None, obliquity_deg=None, knee_peak_deg=None,
-                 thresholds: VerdictThresholds = VerdictThresholds()):
+                 left_right_exchanged=None, thresholds: VerdictThresholds = VerdictThresholds()):
     """The clip verdict and its reasons.
 
     Parameters
@@ -470,6 +487,9 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
         How far the camera looks away from the runner's side (:func:`view_obliquity`).
     knee_peak_deg : float, optional
         The knees' flexion peak (:func:`knee_flexion_peak`).
+    left_right_exchanged : dict, optional
+        ``{"legs": fraction}`` of the frames whose left/right labels were exchanged
+        (:func:`probreg.filtering.relabel_left_right`; the arms are not relabelled).
 
     Returns
     -------
@@ -493,6 +513,8 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
     ('unreliable', ['oblique view (48 deg from the side)'])
     >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, knee_peak_deg=56.2)
     ('unreliable', ['knee flexion peak 56 deg'])
+    >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, left_right_exchanged={"legs": 0.42})
+    ('unreliable', ['left/right labels unsure (legs exchanged in 42 % of frames)'])
     """
     t = thresholds
     reasons, uncal = [], False
@@ -550,5 +572,8 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
         reasons.append(f"oblique view ({obliquity_deg:.0f} deg from the side)")
     if knee_peak_deg is not None and np.isfinite(knee_peak_deg) and knee_peak_deg < t.min_knee_peak_deg:
         reasons.append(f"knee flexion peak {knee_peak_deg:.0f} deg")
+    for limb, frac in (left_right_exchanged or {}).items():
+        if frac is not None and np.isfinite(frac) and frac > t.max_exchanged_fraction:
+            reasons.append(f"left/right labels unsure ({limb} exchanged in {100 * frac:.0f} % of frames)")
     verdict = "uncalibrated" if uncal else ("unreliable" if reasons else "ok")
     return verdict, reasons

@@ -269,13 +269,13 @@ def test_every_reason_the_verdict_gives_is_explained():
         log_height_prior_sd=0.05, side=side, bone_cv_pct={"shank": 40.0}, speed_mps=30.0,
         stature_draws=np.full(50, 3.0), stature_prior=NormalPrior(1.80, 0.16),
         member_sensitivity=float("inf"), lanes_agree=(10, 100), noise_rho=0.9, knee_band_deg=50.0,
-        obliquity_deg=60.0, knee_peak_deg=40.0, branch=branch)
+        obliquity_deg=60.0, knee_peak_deg=40.0, left_right_exchanged={"legs": 0.45}, branch=branch)
     # every check fires once (ESS and multimodality from the same draws)
     starts = ("frames_with_angles", "calibrated_frames", "lanes_agree_frames", "R-hat", "ESS",
               "posterior multimodal", "prior-dominated height", "height barely fixes the camera",
               "camera_side evidence ratio", "branch evidence ratio", "bone length cv", "running speed",
               "stature prior conflict", "keypoint noise unidentified", "knee band wide", "oblique view",
-              "knee flexion peak")
+              "knee flexion peak", "left/right labels unsure")
     assert [next(r for r in reasons if r.startswith(k)) for k in starts]
     assert len(reasons) == len(starts)
     for r in reasons + ["no plausible camera (...)", "lanes no_lines 40/40"]:
@@ -340,3 +340,12 @@ def test_real_running_and_the_generators_runner_bend_the_knee_beyond_the_limit(s
     clip = synthesize(config_from_preset("run", 3, n_frames=100), seed=3, preset="run")
     a = joint_angles(clip.motion.joints_track_m)
     assert knee_flexion_peak({k: (np.asarray(a[k]),) * 3 for k in ("knee_l", "knee_r")}, clip.config.fps) > limit + 15
+
+
+@pytest.mark.parametrize("frac, flagged", [(0.0, False), (0.3, False), (0.34, True), (0.5, True)])
+def test_legs_relabelled_in_a_third_of_the_frames_are_unsure(frac, flagged):
+    verdict, reasons = clip_verdict(**GOOD, left_right_exchanged={"legs": frac})
+    assert (verdict == "unreliable") == flagged
+    assert reasons == ([f"left/right labels unsure (legs exchanged in {100 * frac:.0f} % of frames)"]
+                       if flagged else [])
+    assert clip_verdict(**GOOD, left_right_exchanged={"legs": float("nan")}) == ("ok", [])
