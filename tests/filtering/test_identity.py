@@ -54,7 +54,7 @@ def runner():
 
 @pytest.mark.parametrize("seed", [1, 2, 3])
 def test_swapped_runs_of_legs_are_found_again(runner, seed):
-    truth, noisy = runner
+    _, noisy = runner
     rng = np.random.default_rng(seed)
     legs, arms = _swap_runs(rng, len(noisy)), _swap_runs(rng, len(noisy))
     assert 0.1 < legs.mean() < 0.5 and 0.1 < arms.mean() < 0.5
@@ -79,7 +79,7 @@ def test_right_labels_are_left_alone_and_a_second_pass_changes_nothing(runner):
 
 
 def test_missing_frames_do_not_cut_the_legs_tracks(runner):
-    truth, noisy = runner
+    _, noisy = runner
     legs = _swap_runs(np.random.default_rng(5), len(noisy))
     bad = _exchange(noisy, legs, LEGS)
     gone = np.zeros(len(noisy), bool)
@@ -87,7 +87,7 @@ def test_missing_frames_do_not_cut_the_legs_tracks(runner):
     bad[gone] = np.nan
     # a missing knee alone: the frame's other joints still carry it
     bad[100, J["r_knee"]] = np.nan
-    fixed, exchanged = relabel_left_right(bad, noise_px=3.0)
+    _, exchanged = relabel_left_right(bad, noise_px=3.0)
     seen = ~gone
     np.testing.assert_array_equal(exchanged[seen, 0], legs[seen])
     assert not exchanged[gone].any()  # nothing to relabel there
@@ -124,7 +124,7 @@ def test_bad_shapes_are_refused_and_short_clips_pass_through():
 def test_an_outlier_does_not_pull_the_labels_over(runner):
     """A detector outlier (one joint, one frame, far off) costs the same under either labelling:
     it must not make the legs' labels change for the frames after it."""
-    truth, noisy = runner
+    _, noisy = runner
     legs = _swap_runs(np.random.default_rng(8), len(noisy))
     bad = _exchange(noisy, legs, LEGS)
     for t, j in ((23, J["l_ankle"]), (120, J["r_knee"]), (121, J["r_knee"])):

@@ -19,7 +19,7 @@ def test_cpu_of_a_command_includes_its_forked_workers():
             "    with mp.get_context('fork').Pool(1) as pool:\n"
             "        assert pool.map(work, [0]) == [1]\n")
     cpu = []
-    wall, code = _wall([sys.executable, "-c", burn], cpu=cpu)
+    _, code = _wall([sys.executable, "-c", burn], cpu=cpu)
     assert code == 0 and len(cpu) == 1
     assert cpu[0] >= 0.3
     # and nothing is counted when no list is given
