@@ -46,8 +46,8 @@ def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=
     kp = np.asarray(keypoints_px, float)
     noise = noise_model(kp)[0] if kp.shape[1] == 17 else np.inf
     if kp.shape[1] == 17 and np.isfinite(noise):
-        # legs and arms whose left/right labels the detector got the wrong way round for some
-        # frames are set right first (:func:`probreg.filtering.relabel_left_right`)
+        # legs whose left/right labels the detector got the wrong way round for some frames are
+        # set right first (:func:`probreg.filtering.relabel_left_right`)
         kp = relabel_left_right(kp, noise)[0]
     noisy = keypoints_noisy(kp, noise, noise_floor_px, noise_floor_leg_frac)
     periodic = cutoff_hz == "auto" and noisy

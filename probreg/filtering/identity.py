@@ -1,30 +1,28 @@
-"""Left and right kept apart: the detector's labels of the paired joints repaired from the motion.
+"""Left and right kept apart: the detector's left/right labels of the legs repaired from the motion.
 
 Seen from the side, a runner's legs cross twice a stride and the near leg hides the far one.
 A pose detector then often gives the near leg the far leg's label, for a few frames at a time.
-The lifting takes labels as given, so each side's knee angle becomes a mixture of the two legs.
-Knee errors went from about 3° to 7-24° on tuning clips with 6-29 % of frames swapped in runs of
-2-10 (true cameras and limb lengths, docs/method.md). The cross-stride smoothing down-weights a
-single swapped frame, but not runs of them.
+The lifting takes labels as given, so each side's knee angle becomes a mixture of the two legs:
+on 14 tuning clips with runs of 2-10 swapped frames (6-45 % of the frames; true cameras and limb
+lengths, docs/method.md) the knee error went from 3.4° to 19.6°. The cross-stride smoothing
+down-weights a single swapped frame, but not runs of them.
 
 The joints themselves say which is which: a joint moves smoothly, while a swapped label makes its
-track jump to the other leg and back. For each limb (the legs: hips, knees and ankles; the arms:
-shoulders, elbows and wrists), every frame either keeps the detector's left/right labels or
-exchanges them for the whole limb (a detector decides which side of the body it sees, not joint
-by joint). The sequence of choices minimises the tracks' second differences (their acceleration,
-in units of the detection noise) plus a fixed cost for every change between keeping and
-exchanging (a second-order Viterbi pass over the limb's two states), so a run of swapped frames
-is repaired whatever its length, and the detector's labels stand unless the motion clearly says
-otherwise; a small cost per exchanged frame keeps the detector's labels where the tracks barely
-tell the sides apart. The motion tells which keypoints form one track, not which track is the
-left one: that is the detector's choice in most frames. Only the legs are relabelled: in a side
-view the two arms overlap too much for their tracks to tell them apart (on a simulated runner
-with 3 px noise, runs of swapped arms were found only in part). Where the legs cross, the two knees are at one place but move in opposite
-directions: the second differences, not the positions, tell them apart. A joint missing in a
-frame adds no evidence there. Deciding joint by joint instead (each pair its own chain) repaired
-less: the hips, nearly one point in a side view, carry no evidence of their own, and knees and
-ankles could settle on different legs (mean knee error 12.0° against 3.3° limb by limb on the
-14 tuning clips of docs/method.md).
+track jump to the other leg and back. For the legs (hips, knees and ankles together: a detector
+decides which side of the body it sees, not joint by joint), every frame either keeps the
+detector's labels or exchanges them. The sequence of choices minimises the tracks' second
+differences (their acceleration, in units of the detection noise; each joint's share capped, so
+an outlier costs the same under either labelling) plus a cost for every change between keeping
+and exchanging and a small one per exchanged frame (a second-order Viterbi pass over the two
+states, across missing frames). A run of swapped frames is then repaired whatever its length,
+and the detector's labels stand where the tracks barely tell the sides apart. Where the legs
+cross, the two knees are at one place but move in opposite directions: the second differences,
+not the positions, tell them apart. The motion tells which keypoints form one track, not which
+track is the left one: that is the detector's choice in most frames. The arms are left as
+labelled: in a side view they overlap too much for their tracks to tell them apart (on a
+simulated runner with 3 px noise, runs of swapped arms were found only in part). Deciding joint
+by joint instead (each pair its own chain) repaired less: the hips, nearly one point in a side
+view, carry no evidence of their own, and knees and ankles could settle on different legs.
 """
 
 from __future__ import annotations
@@ -58,8 +56,8 @@ FRAME_COST = 1.0
 
 
 def relabel_left_right(keypoints_px, noise_px, exchange_cost=EXCHANGE_COST, frame_cost=FRAME_COST):
-    """The keypoints with each left/right pair's labels exchanged where the motion says the
-    detector had them the wrong way round (module docstring).
+    """The keypoints with the legs' left/right labels exchanged where the motion says the detector
+    had them the wrong way round (module docstring).
 
     Parameters
     ----------
@@ -77,7 +75,7 @@ def relabel_left_right(keypoints_px, noise_px, exchange_cost=EXCHANGE_COST, fram
         A copy, relabelled.
     exchanged : ndarray (F, 6) bool
         Per frame and pair (:data:`LEFT_RIGHT_PAIRS`) whether the labels were exchanged (the
-        three pairs of a limb together).
+        legs' three pairs together; the arms' never).
 
     >>> t = np.arange(60.0)
     >>> kp = np.zeros((60, 17, 2))
