@@ -178,7 +178,8 @@ def run(args=None):
         rep.add(f"CPU time of the best run, all its processes: {cpu:.1f} s, {cpu / best:.2f} cores busy on "
                 f"average over its {best:.1f} s wall. On two cores the wall time cannot fall below "
                 f"{cpu / 2:.1f} s without less work; {7.5:g} s needs the CPU time at or below {2 * 7.5:g} s.\n")
-        rep.numbers.update(wall_s=best, walls=walls, cpu_s=cpu, cpus=cpus, per_frame_lanes_ms=1000 * timings["lanes_s"] / F,
+        rep.numbers.update(wall_s=best, walls=walls, cpu_s=cpu, cpus=cpus,
+                           per_frame_lanes_ms=1000 * timings["lanes_s"] / F,
                            decode_ms=1000 * t_decode / F, help_s=t_help, **{k: v for k, v in timings.items()})
         rep.add("## Targets (issue 29)\n")
         rep.add(md_table(["target", "wanted", "measured", "met"], [

@@ -124,8 +124,9 @@ reason of its own, a short machine-readable string with the number that triggere
     such keypoints can be smooth and steady, the noise model finds little noise, and the bands
     are narrow around wrong curves.  (Found with a real pose model, ``yolo11n-pose``, on probreg's
     own renders of the tuning twin of the held-out set, seeds 7501-7520: knee errors of 22-48°
-    in 19 runs, eight of them ``ok`` with bands covering 27-45 %; their knee peaks were 35-73°.  The same set-ups with the generator's keypoints (seeds 7501-7540, 8101-8140, 79
-    calibrated clips) peaked at 92-133°.  The limit is the jogging floor with a margin for the
+    in 19 runs, eight of them ``ok`` with bands covering 27-45 %; their knee peaks were 35-73°.
+    The same set-ups with the generator's keypoints (seeds 7501-7540, 8101-8140, 79 calibrated
+    clips) peaked at 92-133°.  The limit is the jogging floor with a margin for the
     lifting's error, and it lies in that gap.)
 ``left/right labels unsure (legs exchanged in x % of frames)``
     the keypoints' left/right labels were set right from the motion
