@@ -156,7 +156,7 @@ def _verdict_exit(res):
     if res.verdict == "ok":
         return 0
     print(f"probreg: warning: verdict {res.verdict!r} ({'; '.join(res.verdict_reasons)}); the results in "
-          f"{res.out_dir} are written but not to be used as they stand (report.html: what each reason means)", file=sys.stderr)
+          f"{res.out_dir} are written but not to be used as they stand (report.html: what each means)", file=sys.stderr)
     return EXIT_NOT_OK
 
 

@@ -21,7 +21,7 @@ __all__ = ["clean_keypoints", "detection_status"]
 
 
 def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=3.0, max_gap=10,
-                    noise_floor_px=NOISE_FLOOR_PX, noise_floor_leg_frac=NOISE_FLOOR_LEG_FRAC):
+                    noise_floor_px=NOISE_FLOOR_PX, noise_floor_leg_frac=NOISE_FLOOR_LEG_FRAC, relabel=True):
     """Left/right labels repaired from the motion, then Hampel outlier rejection, short-gap filling
     and zero-phase low-pass of every coordinate.
 
@@ -38,6 +38,10 @@ def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=
         Butterworth low-pass; otherwise none: a low-pass also flattens the true
         knee-flexion peaks, so clean keypoints are better left alone).
 
+    relabel : bool
+        Set the legs' left/right labels right first (:func:`probreg.filtering.relabel_left_right`);
+        False for keypoints that were relabelled already.
+
     Returns
     -------
     ndarray, shape (F, J, 3)
@@ -45,7 +49,7 @@ def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=
     """
     kp = np.asarray(keypoints_px, float)
     noise = noise_model(kp)[0] if kp.shape[1] == 17 else np.inf
-    if kp.shape[1] == 17 and np.isfinite(noise):
+    if relabel and kp.shape[1] == 17 and np.isfinite(noise):
         # legs whose left/right labels the detector got the wrong way round for some frames are
         # set right first (:func:`probreg.filtering.relabel_left_right`)
         kp = relabel_left_right(kp, noise)[0]

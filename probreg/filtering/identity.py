@@ -132,8 +132,8 @@ def relabel_left_right(keypoints_px, noise_px, exchange_cost=EXCHANGE_COST, fram
         chosen[-2], chosen[-1] = np.unravel_index(np.argmin(D), D.shape)
         for k in range(len(t_seen) - 1, 1, -1):
             chosen[k - 2] = back[k, chosen[k - 1], chosen[k]]
-        # the costs do not change when every frame's choice is flipped: which of the two tracks is
-        # the left one is the detector's, where most of its frames agree
+        # the motion cannot tell which track is the left one: the detector's labels decide, where most
+        # of its frames agree (already so with a cost per exchanged frame; without one, the two tie)
         state[t_seen, g] = 1 - chosen if chosen.mean() > 0.5 else chosen
     exchanged[:, :3 * G] = np.repeat(state.astype(bool), 3, axis=1)  # a limb's three pairs share its choice
     out = kp.copy()

@@ -152,11 +152,10 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self.priors = priors
         self.dist = None if dist is None else np.asarray(dist, float)
         self.athlete_lane = athlete_lane
-        self.raw = np.asarray(keypoints_px, float)
-        self.kp = clean_keypoints(self.raw, self.fps)  # the legs' left/right labels set right first
+        self.raw = np.asarray(keypoints_px, float)  # the detector's labels: a swap stays in the noise
         self.noise_sd, self.noise_rho = noise_model(self.raw)
-        # legs relabelled by the cleaning (run.json); raw keeps the detector's labels: a swap stays noise
-        self.exchanged = relabel_left_right(self.raw, self.noise_sd)[1]
+        relabelled, self.exchanged = relabel_left_right(self.raw, self.noise_sd)  # legs set right (run.json)
+        self.kp = clean_keypoints(relabelled, self.fps, relabel=False)
         self.F = len(self.kp)
         # stride timing for the cross-stride angle smoothing of every lifting (None: no
         # repeating strides, or keypoints too clean to need it -- as in lift()'s "auto")

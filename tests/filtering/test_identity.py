@@ -111,6 +111,10 @@ def test_a_swapped_runner_lifts_as_the_right_one_after_cleaning(runner):
     assert err["swapped"] > 15
     assert err["cleaned swapped"] == pytest.approx(err["cleaned"], abs=1e-9)
     assert noise_model(bad)[0] == pytest.approx(noise_model(noisy)[0], rel=1e-9)  # the trunk's noise only
+    # relabelled beforehand (as a run's clip model does), the cleaning need not do it again
+    again = clean_keypoints(relabel_left_right(bad, noise_model(bad)[0])[0], 50.0, relabel=False)
+    np.testing.assert_array_equal(again, clean_bad)
+    assert not np.array_equal(clean_keypoints(bad, 50.0, relabel=False), clean_bad)
 
 
 def test_bad_shapes_are_refused_and_short_clips_pass_through():
