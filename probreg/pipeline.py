@@ -33,7 +33,7 @@ import numpy as np
 
 from .analysis import GAIT_FIELDS
 from .calibration.lens import LensPrior, lens_registration
-from .calibration.registration import camera_json, register_clip
+from .calibration.registration import camera_json, register_clip, wrong_size_note
 from .calibration.side import requested_side
 from .filtering import detection_status
 from .geometry import JOINT_NAMES
@@ -290,9 +290,8 @@ def _branch_candidate(clip, reg, options, given, branch):
 
 
 def _forked_evidence(clip, reg, options, given, branch):
-    """Start the log evidence of ``branch`` in a forked process (the caller builds the other
-    branch meanwhile: on two cores the second branch costs no wall time); returns a function
-    that waits for ``("ok", log_z)`` or ``("error", message)`` (:func:`probreg.inference.parallel.fork_call`)."""
+    """Start the log evidence of ``branch`` in a forked process (the caller builds the other branch
+    meanwhile); returns a function that waits for ``("ok", log_z)`` or ``("error", message)``."""
 
     def work():
         try:
@@ -365,8 +364,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     A clip no frame of which calibrates (no lanes of the straight anywhere) is not an error: its
     result folder is written with verdict ``"uncalibrated"``, NaN angles and every frame's lane status.
 
-    ``protect`` names further inputs the output may not be or lie in; ``extra_files``
-    ({name: path}) are copied into the result folder (e.g. the keypoints a video run detected).
+    ``protect``: more inputs the output may not be or lie in; ``extra_files`` ({name: path}): copied in.
     """
     t0 = time.perf_counter()
     # options that cannot work are refused before any work
@@ -393,6 +391,9 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                         background=fork_call if default_workers() >= 2 else None)
     t1 = time.perf_counter()
     log(f"lanes: {reg.status_counts()} ({t1 - t0:.1f} s)")
+    if (note := wrong_size_note(reg)) is not None:  # frames of another size are left out, and said so
+        log(f"warning: {note}")
+        clip = replace(clip, notes=(*clip.notes, note))
     for thread in warm:
         thread.join()  # before the branch evidence forks
     try:

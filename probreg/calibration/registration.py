@@ -26,7 +26,8 @@ from ..lanes import (
 from .side import camera_side_evidence, forward_px_of
 from .family import CalibrationError, CalibrationFamily, SequenceCalibration
 
-__all__ = ["DEFAULT_HEIGHT_M", "ANKLE_HEIGHT_M", "ClipRegistration", "athlete_ground_track", "lane_anchor_shift", "register_frames", "register_clip", "undistorted_members"]
+__all__ = ["DEFAULT_HEIGHT_M", "ANKLE_HEIGHT_M", "ClipRegistration", "athlete_ground_track", "lane_anchor_shift", "register_frames", "register_clip", "undistorted_members",
+           "wrong_size_note"]
 
 
 #: Height used when none is given and no posterior is available: the median of
@@ -500,6 +501,40 @@ SPLIT_MIN_FRAMES = 60
 SPLIT_SHARE = 0.40
 
 
+def _track_sized(frames, image_size, config, keypoints_px):
+    """:func:`probreg.lanes.track_lanes` on frames ``(index, image)`` of which those whose size is not
+    the clip's ``image_size`` count as unreadable: status ``bad_image``, their size in
+    ``extra["image_size_px"]`` (their lines, in other pixels, would give another camera)."""
+    wrong = {}
+
+    def sized():
+        for i, img in frames:
+            if img is not None and (img.shape[1], img.shape[0]) != tuple(image_size):
+                wrong[i], img = [int(img.shape[1]), int(img.shape[0])], None
+            yield i, img
+
+    fls = track_lanes(sized(), config, keypoints_px=keypoints_px)
+    return [replace(fl, extra={**fl.extra, "image_size_px": wrong[fl.frame]}) if fl.frame in wrong else fl
+            for fl in fls]
+
+
+def wrong_size_note(reg: ClipRegistration):
+    """The input note about frames whose image size is not the clip's (None when there are none).
+
+    >>> from probreg.lanes import FrameLanes
+    >>> fls = [FrameLanes(status="bad_image", frame=3, extra={"image_size_px": [960, 540]}), FrameLanes(status="no_lines", frame=4)]
+    >>> reg = ClipRegistration(fls, None, np.array([1.0, 0.0]), (1920, 1080))
+    >>> wrong_size_note(reg)
+    '1 frame(s) not 1920x1080 like the clip (first: frame 3, 960x540): left out of the lane step'
+    """
+    wrong = [fl for fl in reg.frame_lanes if "image_size_px" in fl.extra]
+    if not wrong:
+        return None
+    w, h = reg.image_size
+    return (f"{len(wrong)} frame(s) not {w}x{h} like the clip (first: frame {wrong[0].frame}, "
+            f"{wrong[0].extra['image_size_px'][0]}x{wrong[0].extra['image_size_px'][1]}): left out of the lane step")
+
+
 def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(), smooth=True,
                   mask_athlete=True, progress=None, background=None, started=None):
     """Detect lanes in every frame of a clip and build the per-frame families.
@@ -533,7 +568,7 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
     mid = int(n * SPLIT_SHARE) // step * step if background is not None and clip.frame_paths \
         and n >= SPLIT_MIN_FRAMES else n
     mid = mid if 0 < mid < n else n
-    second = background(lambda: track_lanes(iter_frames(clip, start=mid), config, keypoints_px=kp)) \
+    second = background(lambda: _track_sized(iter_frames(clip, start=mid), clip.image_size, config, kp)) \
         if mid < n else None
     if started is not None:
         started()
@@ -541,7 +576,7 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
     frames = iter_frames(clip, mid)
     try:
         fls = []
-        for fl in track_lanes(frames, config, keypoints_px=kp):
+        for fl in _track_sized(frames, clip.image_size, config, kp):
             fls.append(fl)
             if bar is not None:
                 bar.update(1)

@@ -533,7 +533,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
         sd_m = float(sd_m) if np.isfinite(sd_m) else 0.0
         for s in OBSERVED_SEGMENTS:
             lens = np.concatenate([np.linalg.norm(P[:, J[b]] - P[:, J[a]], axis=-1) for a, b in SEGMENT_BONES[s]])
-            lens = lens[np.isfinite(lens)]
+            lens = lens[np.isfinite(lens) & (lens > 0)]  # joints at one point measure no length
             if len(lens) < 10:
                 continue
             obs = float(np.percentile(lens, 60))
@@ -629,7 +629,8 @@ class ClipModel(DrawPropagation, EmceeSampling):
         g = int(np.nanargmax(np.where(np.isfinite(lp), lp, -np.inf)))
         base = theta_grid[g]
         # stature from the observed thigh + shank at that height, if available
-        obs = np.nanmean([self.seg_obs[s][g] / SEGMENT_PROPORTIONS[s] for s in ("thigh", "shank")])
+        obs = [self.seg_obs[s][g] / SEGMENT_PROPORTIONS[s] for s in ("thigh", "shank")]
+        obs = float(np.mean([v for v in obs if np.isfinite(v)] or [np.nan]))  # neither seen: NaN, no warning
         if np.isfinite(obs):
             base[1] = obs
         step = np.log(self.grid[1] / self.grid[0]) if len(self.grid) > 1 else 0.05

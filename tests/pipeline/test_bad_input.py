@@ -191,6 +191,8 @@ def test_run_end_to_end_with_missing_image_stray_file_and_absurd_keypoint(clip, 
     in one run: it completes, and run.json says what happened per frame."""
     (clip / "frames" / "000020.jpg").unlink()
     shutil.copy(clip / "frames" / "000007.jpg", clip / "frames" / "Thumbs.jpg")
+    half = cv2.imread(str(clip / "frames" / "000030.jpg"))  # one frame of another size: its lines are in other pixels
+    cv2.imwrite(str(clip / "frames" / "000030.jpg"), cv2.resize(half, (half.shape[1] // 2, half.shape[0] // 2)))
     doc = json.loads((clip / "keypoints2d.json").read_text())
     doc["frames"][12]["keypoints"][2][0] = 1e10
     for i in (26, 27, 36, 37, 38, 39):  # no athlete: a short gap, and the clip's last four frames
@@ -208,6 +210,9 @@ def test_run_end_to_end_with_missing_image_stray_file_and_absurd_keypoint(clip, 
     assert run["frame_status"][19] == "ok" and run["frame_status"][21] == "ok"
     assert run["keypoints_outside_image"][12] == 1 and sum(run["keypoints_outside_image"]) == 1
     assert any("Thumbs.jpg" in n for n in run["input_notes"])
+    assert run["frame_status"][30] in ("bad_image", "bridged")  # left out of the lane step, not measured
+    assert any(n.startswith("1 frame(s) not") and "frame 30" in n for n in run["input_notes"])
+    assert "frame 30" in err.out
     assert any("no detected joint in 6 of 40 frames (first: frame 26)" in n for n in run["input_notes"])
     assert (out / "report.html").exists() and (out / "angles.csv").exists()
     # why a frame has no angles: its keypoints' status, consistent with angles.csv
@@ -222,6 +227,21 @@ def test_run_end_to_end_with_missing_image_stray_file_and_absurd_keypoint(clip, 
             assert np.isnan(by_frame.get(i, np.nan)), i
         elif st == "ok":
             assert np.isfinite(by_frame[i]), i
+
+
+@pytest.mark.filterwarnings("error::RuntimeWarning")
+def test_joints_all_at_one_pixel_give_a_result_without_numpy_warnings(clip, tmp_path, capsys):
+    """Degenerate keypoints (every joint of every frame at one pixel: no limb has a length) end with
+    a result and a verdict, not with numpy's divide-by-zero warnings on the way."""
+    doc = json.loads((clip / "keypoints2d.json").read_text())
+    for f in doc["frames"]:
+        f["keypoints"] = [[1000.0, 500.0, 0.9]] * 17
+    (clip / "keypoints2d.json").write_text(json.dumps(doc))
+    code = main(["run", str(clip), "--out", str(tmp_path / "out")] + FAST_RUN)
+    err = capsys.readouterr().err
+    assert "Warning" not in err and "Traceback" not in err, err
+    run = json.loads((tmp_path / "out" / "run.json").read_text())
+    assert code == (0 if run["verdict"] == "ok" else 3) and (tmp_path / "out" / "angles.csv").exists()
 
 
 # ----------------------------------------------------------------------------- 5. metadata
