@@ -62,3 +62,38 @@ def test_gait_cycle_csv_round_trip(tmp_path):
     assert p.read_text().splitlines()[0] == "angle,side,cycle_pct,median_deg,lo_deg,hi_deg"
     back = read_gait_cycle_csv(p)
     assert np.allclose(back[("knee", "L")][2], pct - 1)
+
+
+def _late_contacts(F, stride, first, late, missed=()):
+    """Contacts (F, 2): left touchdowns every ``stride`` frames from ``first[0]``, right ones from
+    ``first[1]``, each foot's touchdowns ``late`` frames late (a lifting's offset per foot), 40 % of
+    a stride long; touchdowns in ``missed`` (frame numbers before the offset) not seen."""
+    c = np.zeros((F, 2), bool)
+    for side in (0, 1):
+        t = first[side]
+        while t < F:
+            if round(t) not in missed:
+                a = int(np.rint(t + late[side]))
+                c[a:min(F, a + int(0.4 * stride)), side] = True
+            t += stride
+    return c
+
+
+def test_cadence_is_right_when_one_foots_touchdowns_are_late_or_missed():
+    """Steps alternating short and long (one foot's touchdowns 5 frames late) do not move the
+    cadence, and neither does a missed touchdown; the steps' median alone gave 23 % too few."""
+    from types import SimpleNamespace
+
+    from probreg.analysis import gait_summary, step_time_s
+
+    stride = 34.0  # frames at 50 fps: 176.5 steps/min
+    F = 300
+    c = _late_contacts(F, stride, (10.0, 27.0), (0.0, 5.0), missed=(146,))
+    track = SimpleNamespace(contacts=c, velocity_mps=np.tile([6.0, 0.0], (F, 1)))
+    angles = {"knee_l": np.full(F, 30.0), "knee_r": np.full(F, 30.0)}
+    g = gait_summary(track, angles, 50.0)
+    assert abs(g["cadence_spm"] - 60 * 50 / (stride / 2)) < 0.5
+    assert abs(g["step_length_m"] - 6.0 * stride / 2 / 50) < 0.01
+    # what the steps alone say (both feet's touchdowns in one list): 12 and 22 frames alternating
+    tds = np.flatnonzero(np.diff(c.astype(int), axis=0).max(1) == 1) + 1
+    assert 60 / step_time_s(tds, 50.0) < 0.8 * g["cadence_spm"]
