@@ -38,7 +38,7 @@ from .calibration.side import requested_side
 from .filtering import detection_status
 from .geometry import JOINT_NAMES
 from .inference import (STATIC_INTERVAL_SCALE, ModelPriors, angle_bands, bootstrap_noise_ratio, gait_cycle_bands,
-                        gait_intervals, static_interval)
+                        gait_check, gait_intervals, static_interval)
 from .inference.heights import HEIGHT_SYSTEMATIC_SD
 from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationError
 from .inference.sampling import SamplerSettings
@@ -106,6 +106,7 @@ class RunResult:
     band_decomposition: dict = field(default_factory=dict)
     branch: object = None  # the family branch (probreg.inference.evidence.BranchChoice)
     band_noise_ratio: dict = field(default_factory=dict)  # run.json's: bands.bootstrap_noise_ratio
+    gait_verdict_reasons: tuple = ()  # run.json's: probreg.inference.gait_check (gait.json's "status")
 
 
 #: report figures drawn in a forked process while the files are written (html.run_figures); the
@@ -181,13 +182,10 @@ def _diagnostics(sampler, tau, idata, names=PARAM_NAMES):
     return {
         "acceptance_fraction": float(np.mean(sampler.acceptance_fraction)),
         "tau": {n: float(t) for n, t in zip(names, tau)},
-        "steps": int(sampler.iteration),
-        "walkers": int(sampler.nwalkers),
+        "steps": int(sampler.iteration), "walkers": int(sampler.nwalkers),
         "steps_per_tau": float(sampler.iteration / np.max(tau)) if np.all(np.isfinite(tau)) else float("nan"),
-        "ess_height": float(ess["log_height"]),
-        "ess_stature": float(ess["stature"]),
-        "rhat_height": float(rhat["log_height"]),
-        "rhat_stature": float(rhat["stature"]),
+        "ess_height": float(ess["log_height"]), "ess_stature": float(ess["stature"]),
+        "rhat_height": float(rhat["log_height"]), "rhat_stature": float(rhat["stature"]),
     }
 
 
@@ -257,7 +255,7 @@ def _write_uncalibrated(clip, reg, side, out_dir, options, error, t0, log, input
         write_json(tmp / "camera.json", camera_json([None] * F, float("nan"), F))
         write_json(tmp / "run.json", {"verdict": "uncalibrated", "verdict_reasons": reasons, "error": message,
                                      "camera_side": side.to_dict(), "input_notes": list(clip.notes),
-                                     "timings_s": timings, "frame_status": status,
+                                     "timings_s": timings, "frame_status": status, "gait_verdict": "uncalibrated",
                                      "keypoint_status": detection_status(clip.keypoints_px),
                                      "lane_status_counts": counts})
         result = RunResult(out_dir=out_dir, model=None, posterior=None, angle_summary=summ, height={},
@@ -284,8 +282,7 @@ def _branch_candidate(clip, reg, options, given, branch):
         if k1_only and lens is not None:
             lens, dist = replace(lens, prior=LensPrior.given(dist[0]), given_k1=float(dist[0])), None
     model = ClipModel(model_reg, clip.keypoints_px, clip.fps, clip.athlete_lane, priors=options.priors,
-                      dist=dist, branch=branch, lens=lens,
-                      height_systematic_sd=options.height_allowance)
+                      dist=dist, branch=branch, lens=lens, height_systematic_sd=options.height_allowance)
     return reg, side, lens, model
 
 
@@ -399,8 +396,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     try:
         reg, side, lens, model, branch = _branch_models(clip, reg, options, given, log)
     except NoCalibrationError as exc:
-        return _write_uncalibrated(clip, reg, reg.camera_side, out_dir, options, exc, t0, log, inputs,
-                                   extra_files)
+        return _write_uncalibrated(clip, reg, reg.camera_side, out_dir, options, exc, t0, log, inputs, extra_files)
     smp = options.sampler
     # the bootstrap's re-noised keypoints do not depend on the posterior: made on the other core
     # while the sampler runs on this one (the propagation's workers make the rest)
@@ -414,8 +410,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     draws = flat[rng.choice(len(flat), min(smp.n_draws, len(flat)), replace=False)]
     copies, seeds = ahead() if ahead is not None else (None, None)
     prop = model.propagate(draws, rng, bootstrap_noise=smp.bootstrap_noise, progress=options.progress,
-                           draws_per_noise_copy=smp.draws_per_noise_copy, noise_copies=copies,
-                           noise_copy_seeds=seeds)
+                           draws_per_noise_copy=smp.draws_per_noise_copy, noise_copies=copies, noise_copy_seeds=seeds)
     joints, gait = prop["joints"], prop["gait"]
     decomposition = model.band_decomposition(draws, prop, rng)
     idata = posterior_inference_data(sampler, keypoints_px=clip.keypoints_px, frame_lanes=reg.frame_lanes,
@@ -435,6 +430,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         summ = angle_bands(pa, pn, clip.fps, inflation=options.band_inflation, noise_ratio=ratio)
         gait_s = {k: {"median": m, "lo": lo, "hi": hi, "unit": GAIT_FIELDS[k]} for k, (m, lo, hi) in
                   gait_intervals(prop["gait_point"], gait, inflation=options.band_inflation).items()}
+        gait_s, gait_status, gait_reasons = gait_check(gait_s, model.stride_frames(), clip.fps)
         joints_med = np.nanmedian(prop["joints_point"], 0)
         cycles = gait_cycle_bands(pa, pn, model.contacts, inflation=options.band_inflation, noise_ratio=ratio)
     cams_med = model.cameras_at(height["median"])
@@ -468,7 +464,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                        gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
                        verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,
                        frame_status=status, lens=lens_doc, band_decomposition=decomposition,
-                       branch=branch, athlete=athlete, band_noise_ratio=ratio)
+                       branch=branch, athlete=athlete, band_noise_ratio=ratio, gait_verdict_reasons=tuple(gait_reasons))
     with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=inputs, log=log) as tmp:
         if options.report:  # most figures render on the other core while the files are written here
             figures = fork_call(lambda: render_figures(clip, result, REPORT_FIGURES_ELSEWHERE))
@@ -488,6 +484,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         kpo = clip.keypoints_outside
         extra = {} if kpo is None else {"keypoints_outside_image": kpo.tolist()}
         write_json(tmp / "run.json", {"verdict": verdict, "verdict_reasons": reasons,
+                                     "gait_verdict": gait_status, "gait_verdict_reasons": gait_reasons,
                                      "camera_side": side.to_dict(), "branch": branch.to_json(),
                                      "input_notes": list(clip.notes), **extra,
                                      "diagnostics": diag, "timings_s": timings, "height_m": height,
@@ -501,6 +498,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                                      "priors": options.priors.describe()})
         if options.report:  # a failure in a process draws its figures again here, and raises as itself
             run_report(tmp / "report.html", clip, result, joints_med, cam_list, rendered={**early(), **figures()})
+    if gait_reasons:
+        log(f"warning: gait numbers from the contacts unreliable ({'; '.join(gait_reasons)}): see gait.json's status")
     log(f"height {height['median']:.2f} m [{height['lo']:.2f}, {height['hi']:.2f}]; "
         f"{diag['steps']} steps (tau max {max(diag['tau'].values()):.0f}); total {timings['total_s']:.1f} s")
     return result

@@ -24,6 +24,7 @@ table{border-collapse:collapse;margin:1em 0}td,th{border:1px solid #ccc;padding:
 th{background:#f3f3f3}img{max-width:100%}figure{margin:1em 0}figcaption{color:#555;font-size:90%}
 .note{color:#555;font-size:90%}
 .banner{background:#fde2e2;border:2px solid #b00;padding:.6em 1em;font-weight:bold}
+.warning{background:#fff4d6;border:1px solid #c80;padding:.4em 1em}
 .ok{background:#e5f5e5;border:1px solid #3a3;padding:.4em 1em}"""
 
 def _subplots(nrows=1, ncols=1, **kw):
@@ -339,8 +340,14 @@ def run_report(out_html, clip, result, joints_median, cameras, rendered=None):
         else:
             rep.paragraph(f"Lens: k1 {lens['median']:+.3f} ({lens['source']}).", cls="note")
     rep.heading("Gait")
-    rep.table(["quantity", "median", "5 %", "95 %", "unit"],
-              [[k, v["median"], v["lo"], v["hi"], GAIT_FIELDS.get(k, "")] for k, v in result.gait.items()])
+    gait_reasons = getattr(result, "gait_verdict_reasons", ())
+    if gait_reasons:
+        rep.paragraph("The gait numbers that rest on the detected ground contacts are unreliable: "
+                      + "; ".join(gait_reasons) + " (probreg.inference.gait_check). Their bands do not "
+                      "cover this; the angles do not rest on the contacts' timing.", cls="warning")
+    rep.table(["quantity", "median", "5 %", "95 %", "unit", "status"],
+              [[k, v["median"], v["lo"], v["hi"], GAIT_FIELDS.get(k, ""), v.get("status", "")]
+               for k, v in result.gait.items()])
     if clip.frame_paths:
         mid = len(clip.frame_paths) // 2
         img = read_frame(clip, mid)
