@@ -101,8 +101,34 @@ def score_validation(clip_dir: Path, out_dir: Path):
         "stature_in_interval": bool(st_lo <= st_true <= st_hi),
         "verdict": run.get("verdict", "n/a"), "verdict_reasons": run.get("verdict_reasons", []),
         "camera_side": run.get("camera_side", {}).get("chosen", "n/a"),
+        "gait_verdict": run.get("gait_verdict", "n/a"), "gait_verdict_reasons": run.get("gait_verdict_reasons", []),
     })
     return s
+
+
+def gait_table(scores):
+    """The cadence (``gait.json``) against the truth, split by the gait verdict
+    (:mod:`probreg.inference.gait_check`): rows ``[gait verdict, clips, mean |error| %, largest
+    |error| %, clips above 5 %, intervals holding the truth]``; a clip without a cadence counts
+    as above 5 % and as a miss.
+
+    >>> s = {"a": {"gait_verdict": "ok", "gait": {"cadence_spm": {"rel_pct": -2.0, "inside": True}}},
+    ...      "b": {"gait_verdict": "unreliable", "gait": {}}}
+    >>> gait_table(s)
+    [['ok', 1, 2.0, 2.0, 0, '1 of 1'], ['unreliable', 1, nan, nan, 1, '0 of 1']]
+    """
+    rows = []
+    for verdict in ("ok", "unreliable"):
+        sel = [s for s in scores.values() if s.get("gait_verdict") == verdict]
+        if not sel:
+            continue
+        cad = [s.get("gait", {}).get("cadence_spm") for s in sel]
+        err = [abs(c["rel_pct"]) for c in cad if c is not None and np.isfinite(c["rel_pct"])]
+        big = sum(c is None or not np.isfinite(c["rel_pct"]) or abs(c["rel_pct"]) > 5 for c in cad)
+        rows.append([verdict, len(sel), float(np.mean(err)) if err else float("nan"),
+                     float(np.max(err)) if err else float("nan"), big,
+                     f"{sum(bool(c and c['inside']) for c in cad)} of {len(sel)}"])
+    return rows
 
 
 def _run_cli(clip: Path, out: Path, extra=()):
@@ -317,3 +343,13 @@ def _run_sets(rep, sets, only, keep=None):
         rep.add(f"### Targets (issue 25) on the {title.split(' (')[0]}\n")
         rep.add(md_table(["target", "wanted", "measured", "met"],
                          [[a, b, c, "yes" if d else "**no**"] for a, b, c, d in _targets(summary)]))
+        gt = gait_table(scores)
+        if gt:
+            rep.add(f"### Cadence by gait verdict on the {title.split(' (')[0]}\n\nThe gait verdict "
+                    "(`run.json` `gait_verdict`, `probreg.inference.gait_check`) checks the contacts' cadence "
+                    "against the stride period of the 2D pattern; no target in the issues.\n")
+            rep.add(md_table(["gait verdict", "clips", "cadence mean abs. error %", "largest %", "above 5 % or none",
+                              "90 % intervals holding the truth"], gt))
+            flagged = [f"{n} ({'; '.join(s['gait_verdict_reasons'])})" for n, s in scores.items()
+                       if s.get("gait_verdict") == "unreliable"]
+            rep.add("Gait numbers flagged: " + ("; ".join(flagged) or "none") + ".\n")
