@@ -59,7 +59,7 @@ MANIFEST_COLUMNS = {
 #: columns of ``summary.csv``
 SUMMARY_COLUMNS = ["clip", "name", "status", "error", "verdict", "verdict_reasons", "knee_l_median_deg",
                    "knee_r_median_deg", "knee_band_width_deg", "camera_height_m", "camera_height_lo_m",
-                   "camera_height_hi_m", "wall_s", "skipped"]
+                   "camera_height_hi_m", "wall_s", "skipped", "gait_verdict"]
 
 def _defaults():
     """The options of a batch entry with their ``probreg run`` defaults (read from the classes
@@ -251,7 +251,7 @@ def _row_from_result(entry: BatchEntry, target):
     verdict = run.get("verdict", "n/a")
     row = {"clip": str(entry.clip), "name": entry.name, "status": "ok" if verdict == "ok" else "flagged",
            "error": "", "verdict": verdict, "verdict_reasons": "; ".join(run.get("verdict_reasons", [])),
-           "skipped": "no"}
+           "skipped": "no", "gait_verdict": run.get("gait_verdict", "n/a")}
     h = run.get("height_m") or {}
     row.update(camera_height_m=h.get("median"), camera_height_lo_m=h.get("lo"), camera_height_hi_m=h.get("hi"))
     try:

@@ -84,6 +84,7 @@ def test_batch_isolates_a_broken_clip_resumes_and_equals_single_runs(season, tmp
     for r in (rows[0], rows[2]):
         assert r["status"] in ("ok", "flagged") and r["error"] == "" and float(r["knee_band_width_deg"]) > 0
         assert r["verdict"] in ("ok", "unreliable") and float(r["wall_s"]) > 0
+        assert r["gait_verdict"] in ("ok", "unreliable")
     # the same clip, the same options: batch equals a single `probreg run` byte for byte
     single = tmp_path / "single"
     main(["run", str(season / "heat1"), "--out", str(single), "--walkers", "20", "--max-steps", "600",
