@@ -450,6 +450,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     agree = (status.count("ok"), sum(status.count(k) for k in ("ok", "bridged_no_member", "bridged_inconsistent")))
     diag["view_obliquity_deg"] = obliquity = view_obliquity(cam_list, joints_med)
     diag["knee_flexion_peak_deg"] = knee_peak = knee_flexion_peak(summ, clip.fps)
+    diag["cadence_stride_pattern_spm"] = 120.0 * clip.fps / model.stride_frames()  # gait_check's (NaN: none)
     diag["left_right_exchanged"] = exchanged = {"legs": float(model.exchanged[:, 0].mean())}  # the arms: never
     verdict, reasons = clip_verdict(
         clip.n_frames, calibrated=sum(c is not None for c in cam_list), frames_with_angles=n_angle,
