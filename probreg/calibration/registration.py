@@ -26,8 +26,8 @@ from ..lanes import (
 from .side import camera_side_evidence, forward_px_of
 from .family import CalibrationError, CalibrationFamily, SequenceCalibration
 
-__all__ = ["DEFAULT_HEIGHT_M", "ANKLE_HEIGHT_M", "ClipRegistration", "athlete_ground_track", "lane_anchor_shift", "register_frames", "register_clip", "undistorted_members",
-           "wrong_size_note"]
+__all__ = ["DEFAULT_HEIGHT_M", "ANKLE_HEIGHT_M", "ClipRegistration", "athlete_ground_track", "lane_anchor_shift",
+           "register_frames", "register_clip", "undistorted_members", "wrong_size_note"]
 
 
 #: Height used when none is given and no posterior is available: the median of
@@ -522,7 +522,8 @@ def wrong_size_note(reg: ClipRegistration):
     """The input note about frames whose image size is not the clip's (None when there are none).
 
     >>> from probreg.lanes import FrameLanes
-    >>> fls = [FrameLanes(status="bad_image", frame=3, extra={"image_size_px": [960, 540]}), FrameLanes(status="no_lines", frame=4)]
+    >>> fls = [FrameLanes(status="bad_image", frame=3, extra={"image_size_px": [960, 540]}),
+    ...        FrameLanes(status="no_lines", frame=4)]
     >>> reg = ClipRegistration(fls, None, np.array([1.0, 0.0]), (1920, 1080))
     >>> wrong_size_note(reg)
     '1 frame(s) not 1920x1080 like the clip (first: frame 3, 960x540): left out of the lane step'

@@ -174,7 +174,8 @@ def test_run_pipeline_writes_the_result_layout(small_clip, tmp_path):
     assert priors["running_speed"] == "flat up to 12.5 m/s, half-normal of sd 0.5 m/s beyond"
     # the gait verdict and each gait number's status agree (probreg.inference.gait_check)
     gait = json.loads((out / "gait.json").read_text())
-    assert run["gait_verdict"] in ("ok", "unreliable") and (run["gait_verdict"] == "ok") == (not run["gait_verdict_reasons"])
+    assert run["gait_verdict"] in ("ok", "unreliable")
+    assert (run["gait_verdict"] == "ok") == (not run["gait_verdict_reasons"])
     assert gait["speed_mps"]["status"] == "ok" and gait["cadence_spm"]["status"] == run["gait_verdict"]
     assert "cadence_stride_pattern_spm" in run["diagnostics"]  # NaN here: 40 frames hold no two strides
     import arviz as az
