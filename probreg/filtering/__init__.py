@@ -18,6 +18,7 @@ from .clean import clean_keypoints, detection_status
 from .identity import relabel_left_right
 from .pair import periodic_smooth_pair
 from .periodic import (
+    pattern_mismatch,
     periodic_smooth,
     periodic_smooth_series,
     score_noise_scale,
@@ -28,6 +29,6 @@ from .periodic import (
 __all__ = [
     "hampel", "fill_gaps", "butterworth", "clean_keypoints", "detection_status", "keypoint_noise_px", "noise_model",
     "keypoints_noisy", "leg_length_px", "NOISE_FLOOR_PX", "NOISE_FLOOR_LEG_FRAC",
-    "periodic_smooth", "periodic_smooth_pair", "periodic_smooth_series", "score_noise_scale", "stride_lags",
+    "periodic_smooth", "periodic_smooth_pair", "periodic_smooth_series", "score_noise_scale", "stride_lags", "pattern_mismatch",
     "stride_period_frames", "relabel_left_right",
 ]

@@ -17,7 +17,8 @@ from scipy.ndimage import median_filter
 from .banded import SeriesSystem, lower_band
 from .basic import _lowpass_series, butterworth, fill_gaps, hampel, noise_model
 
-__all__ = ["periodic_smooth", "periodic_smooth_series", "score_noise_scale", "stride_lags", "stride_period_frames"]
+__all__ = ["periodic_smooth", "periodic_smooth_series", "score_noise_scale", "stride_lags", "stride_period_frames",
+           "pattern_mismatch"]
 
 
 # --------------------------------------------------------------------------- cross-stride smoothing
@@ -130,6 +131,28 @@ def stride_lags(keypoints_px, fps, min_strides=MIN_STRIDES):
         return None
     tracks = _relative_tracks(kp, fps, noise_model(kp)[0])
     return None if tracks is None else _lags_of(tracks[3], fps, min_strides)
+
+
+def pattern_mismatch(keypoints_px, fps, lags):
+    """Mean squared difference of the whole-body 2-D pattern (the outlier-free, trunk-relative
+    tracks :func:`stride_lags` matches) with itself ``lag`` frames later, for each of ``lags``
+    (rounded to whole frames; body-scale units); NaN where it cannot be measured."""
+    kp = np.asarray(keypoints_px, float)
+    out = np.full(len(lags), np.nan)
+    if kp.ndim != 3 or kp.shape[1] != 17 or len(kp) < 20:
+        return out
+    tracks = _relative_tracks(kp, fps, noise_model(kp)[0])
+    if tracks is None:
+        return out
+    y = tracks[3].reshape(len(kp), -1)
+    for i, lag in enumerate(lags):
+        L = int(np.rint(float(lag))) if np.isfinite(lag) else 0
+        if 0 < L < len(y):
+            d = y[L:] - y[:-L]
+            ok = np.isfinite(d)
+            if ok.sum() > 10:
+                out[i] = float(np.mean(d[ok] ** 2))
+    return out
 
 
 def _lags_of(rel_t, fps, min_strides):

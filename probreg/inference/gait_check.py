@@ -13,7 +13,9 @@ A second, independent estimate of the step time exists: the stride period of the
 2-D pattern (:func:`probreg.filtering.stride_lags`, which the cross-stride smoothing uses).
 It needs no camera and no contact; on the 80 tuning clips (seeds 7501-7540 and 8101-8140) it
 was within 2 % of the true cadence on 78, and off by a factor of two (a lag of two strides)
-on the other two. The checks:
+on the other two. Those two are caught by the pattern itself (:func:`pattern_stride_frames`):
+half their lag repeats the pattern nearly as well as the lag (mismatch ratio 1.7), where on
+every other clip half a stride (the legs swapped) mismatches at least 8 times more. The checks:
 
 ``cadence x steps/min from the contacts, y from the stride pattern``
     the two differ by more than :data:`CADENCE_TOLERANCE` (a factor of two either way is
@@ -32,7 +34,7 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CADENCE_TOLERANCE", "CONTACT_NUMBERS", "gait_check"]
+__all__ = ["CADENCE_TOLERANCE", "CONTACT_NUMBERS", "HALF_LAG_RATIO", "gait_check", "pattern_stride_frames"]
 
 #: the gait numbers that rest on the detected contacts (``speed_mps`` does not: the ground track)
 CONTACT_NUMBERS = ("cadence_spm", "step_length_m", "contact_time_s", "flight_time_s",
@@ -44,6 +46,36 @@ CONTACT_NUMBERS = ("cadence_spm", "step_length_m", "contact_time_s", "flight_tim
 #: and 10 were flagged (8 of them 6-97 % off or without a cadence; 7508 because the pattern's
 #: lag was two strides; 7511 at 4.4 %); at 8 % the passed clips held errors up to 7.5 %.
 CADENCE_TOLERANCE = 0.05
+
+
+#: a stride lag whose half repeats the 2-D pattern with less than this times its own mismatch is
+#: two strides (the tuning clips: 1.7 on the two such clips, 8 and more on the 78 others)
+HALF_LAG_RATIO = 3.0
+
+
+def pattern_stride_frames(keypoints_px, fps, lags=None):
+    """The stride period (frames) of the whole-body 2-D pattern: the median of the per-frame
+    stride lags (``lags``, else :func:`probreg.filtering.stride_lags` of ``keypoints_px``), halved
+    when half of it repeats the pattern nearly as well (:data:`HALF_LAG_RATIO`: the lag was two
+    strides); NaN without repeating strides.
+
+    >>> t = np.arange(300.0)[:, None, None]
+    >>> rng = np.random.default_rng(1)
+    >>> kp = np.concatenate([100 * np.sin(2 * np.pi * t / 30 + np.arange(17)[None, :, None] + [0, 1])
+    ...                      + rng.normal(0, 0.5, (300, 17, 2)), np.ones((300, 17, 1))], -1)
+    >>> round(pattern_stride_frames(kp, 50.0, lags=np.full(300, 60.0)), 1)  # a lag of two periods
+    30.0
+    >>> round(pattern_stride_frames(kp, 50.0, lags=np.full(300, 30.0)), 1)  # half of one does not repeat
+    30.0
+    """
+    from ..filtering import pattern_mismatch, stride_lags
+
+    lag = stride_lags(keypoints_px, fps) if lags is None else lags
+    if lag is None or not np.isfinite(lag).any():
+        return float("nan")
+    period = float(np.nanmedian(lag))
+    half, whole = pattern_mismatch(keypoints_px, fps, [period / 2, period])
+    return period / 2 if np.isfinite(half) and np.isfinite(whole) and half < HALF_LAG_RATIO * whole else period
 
 
 def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE):

@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..analysis import gait_summary
-from ..filtering import clean_keypoints, score_noise_scale, stride_lags
+from ..filtering import clean_keypoints, score_noise_scale
 from ..geometry import ANGLE_NAMES, JOINT_INDEX, CameraArrays
 from ..lifting import LiftConfig, fit_ground_track, lift
 from ..lifting.trajectory import camera_track_config
@@ -158,12 +158,12 @@ class DrawPropagation:
 
     def stride_frames(self):
         """The clip's stride period (frames) from the whole-body 2-D pattern of the cleaned
-        keypoints (:func:`probreg.filtering.stride_lags`, the median over frames); NaN without
+        keypoints (:func:`probreg.inference.gait_check.pattern_stride_frames`); NaN without
         repeating strides.  The gait numbers' cross-check (:mod:`probreg.inference.gait_check`)."""
         if getattr(self, "_stride_frames", None) is None:
-            lag = self.stride_lag if self.stride_lag is not None else stride_lags(self.kp, self.fps)
-            ok = lag is not None and bool(np.isfinite(lag).any())
-            self._stride_frames = float(np.nanmedian(lag)) if ok else float("nan")
+            from .gait_check import pattern_stride_frames
+
+            self._stride_frames = pattern_stride_frames(self.kp, self.fps, self.stride_lag)
         return self._stride_frames
 
     def bootstrap_copies(self, seeds, stop=None):
