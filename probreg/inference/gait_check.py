@@ -43,8 +43,9 @@ CONTACT_NUMBERS = ("cadence_spm", "step_length_m", "contact_time_s", "flight_tim
 #: largest relative difference between the contacts' cadence and the stride pattern's: the
 #: pattern is within 2 % of the truth, and a cadence is reported to a few per cent. On the tuning
 #: clips 7501-7540 the 29 clips it passed had cadence errors of 1.9 % on average (none above 5 %)
-#: and 10 were flagged (8 of them 6-97 % off or without a cadence; 7508 because the pattern's
-#: lag was two strides; 7511 at 4.4 %); at 8 % the passed clips held errors up to 7.5 %.
+#: and 10 were flagged (8 of them 6-97 % off; 7511 at 4.4 %; 7508 because the pattern's lag was
+#: two strides, which :func:`pattern_stride_frames` now halves: 30 pass, 1.8 %, 9 flagged); at 8 %
+#: the passed clips held errors up to 7.5 %.
 CADENCE_TOLERANCE = 0.05
 
 
