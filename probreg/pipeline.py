@@ -38,7 +38,7 @@ from .calibration.side import requested_side
 from .filtering import detection_status
 from .geometry import JOINT_NAMES
 from .inference import (STATIC_INTERVAL_SCALE, ModelPriors, angle_bands, bootstrap_noise_ratio, gait_cycle_bands,
-                        gait_check, gait_intervals, static_interval)
+                        gait_check, gait_intervals, pattern_cadence_spm, static_interval)
 from .inference.heights import HEIGHT_SYSTEMATIC_SD
 from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationError
 from .inference.sampling import SamplerSettings
@@ -257,7 +257,7 @@ def _write_uncalibrated(clip, reg, side, out_dir, options, error, t0, log, input
                                      "camera_side": side.to_dict(), "input_notes": list(clip.notes),
                                      "timings_s": timings, "frame_status": status, "gait_verdict": "uncalibrated",
                                      "keypoint_status": detection_status(clip.keypoints_px),
-                                     "lane_status_counts": counts})
+                                     "lane_status_counts": counts, "gait_verdict_reasons": []})
         result = RunResult(out_dir=out_dir, model=None, posterior=None, angle_summary=summ, height={},
                            gait={}, diagnostics={}, timings=timings, verdict="uncalibrated",
                            verdict_reasons=tuple(reasons), camera_side=side, frame_status=status)
@@ -450,7 +450,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     agree = (status.count("ok"), sum(status.count(k) for k in ("ok", "bridged_no_member", "bridged_inconsistent")))
     diag["view_obliquity_deg"] = obliquity = view_obliquity(cam_list, joints_med)
     diag["knee_flexion_peak_deg"] = knee_peak = knee_flexion_peak(summ, clip.fps)
-    diag["cadence_stride_pattern_spm"] = 120.0 * clip.fps / model.stride_frames()  # gait_check's (NaN: none)
+    diag["cadence_stride_pattern_spm"] = pattern_cadence_spm(model.stride_frames(), clip.fps)  # gait_check's
     diag["left_right_exchanged"] = exchanged = {"legs": float(model.exchanged[:, 0].mean())}  # the arms: never
     verdict, reasons = clip_verdict(
         clip.n_frames, calibrated=sum(c is not None for c in cam_list), frames_with_angles=n_angle,

@@ -42,7 +42,7 @@ from ..geometry import JOINT_INDEX, SEGMENT_BONES, joint_angles
 from ..io.clip import load_groundtruth, read_cameras_json
 from ..io.results import read_angles_csv
 from .common import BenchReport, find_shared_data, md_table
-from .posterior import score_result
+from .posterior import score_result, true_gait
 
 __all__ = ["run", "score_validation", "peer_knee_errors"]
 
@@ -94,7 +94,10 @@ def score_validation(clip_dir: Path, out_dir: Path):
     st_true = float(gt.athlete["stature_m"])
     st_med, st_lo, st_hi = _stature_interval(out_dir)
     run = json.loads((out_dir / "run.json").read_text())
+    pattern = run.get("diagnostics", {}).get("cadence_stride_pattern_spm")
+    truth = true_gait(clip_dir)["cadence_spm"]
     s.update({
+        "pattern_cadence_pct": 100 * (pattern / truth - 1) if pattern is not None and truth else float("nan"),
         "position_pct": float(np.mean(pos)) if pos else float("nan"),
         "side_ok": bool(side_ok) and bool(np.mean(side_ok) > 0.5),
         "stature_true": st_true, "stature_med": st_med,
@@ -129,6 +132,22 @@ def gait_table(scores):
                      float(np.max(err)) if err else float("nan"), big,
                      f"{sum(bool(c and c['inside']) for c in cad)} of {len(sel)}"])
     return rows
+
+
+def pattern_cadence_line(scores):
+    """One sentence on the stride pattern's cadence (``run.json``
+    ``diagnostics.cadence_stride_pattern_spm``) against the truth.
+
+    >>> line = pattern_cadence_line({"a": {"pattern_cadence_pct": -0.5}, "b": {"pattern_cadence_pct": 3.0}, "c": {}})
+    >>> line[line.index("within"):]
+    'within 2 % of the truth on 1 of 3 clips; mean abs. error 1.75 %, largest 3.00 % (2 clips with a value).'
+    """
+    e = np.array([abs(v.get("pattern_cadence_pct", np.nan)) for v in scores.values()], float)
+    ok = np.isfinite(e)
+    stats = f"mean abs. error {np.mean(e[ok]):.2f} %, largest {np.max(e[ok]):.2f} %" if ok.any() else "no value"
+    return ("Cadence of the stride pattern (`diagnostics.cadence_stride_pattern_spm`, the gait check's "
+            f"reference): within 2 % of the truth on {int(np.sum(e[ok] <= 2))} of {len(e)} clips; {stats} "
+            f"({int(ok.sum())} clips with a value).")
 
 
 def _run_cli(clip: Path, out: Path, extra=()):
@@ -353,3 +372,4 @@ def _run_sets(rep, sets, only, keep=None):
             flagged = [f"{n} ({'; '.join(s['gait_verdict_reasons'])})" for n, s in scores.items()
                        if s.get("gait_verdict") == "unreliable"]
             rep.add("Gait numbers flagged: " + ("; ".join(flagged) or "none") + ".\n")
+            rep.add(pattern_cadence_line(scores) + "\n")

@@ -29,6 +29,6 @@ from .periodic import (
 __all__ = [
     "hampel", "fill_gaps", "butterworth", "clean_keypoints", "detection_status", "keypoint_noise_px", "noise_model",
     "keypoints_noisy", "leg_length_px", "NOISE_FLOOR_PX", "NOISE_FLOOR_LEG_FRAC",
-    "periodic_smooth", "periodic_smooth_pair", "periodic_smooth_series", "score_noise_scale", "stride_lags", "pattern_mismatch",
-    "stride_period_frames", "relabel_left_right",
+    "periodic_smooth", "periodic_smooth_pair", "periodic_smooth_series", "score_noise_scale", "stride_lags",
+    "pattern_mismatch", "stride_period_frames", "relabel_left_right",
 ]

@@ -148,11 +148,16 @@ def pattern_mismatch(keypoints_px, fps, lags):
     for i, lag in enumerate(lags):
         L = int(np.rint(float(lag))) if np.isfinite(lag) else 0
         if 0 < L < len(y):
-            d = y[L:] - y[:-L]
-            ok = np.isfinite(d)
-            if ok.sum() > 10:
-                out[i] = float(np.mean(d[ok] ** 2))
+            out[i] = _lag_mismatch(y, L)
     return out
+
+
+def _lag_mismatch(y, L):
+    """Mean squared difference of the rows of ``y`` (F, D) with those ``L`` frames later (NaN with
+    10 finite differences or fewer)."""
+    diff = y[L:] - y[:-L]
+    ok = np.isfinite(diff)
+    return float(np.mean(diff[ok] ** 2)) if ok.sum() > 10 else float("nan")
 
 
 def _lags_of(rel_t, fps, min_strides):
@@ -174,12 +179,7 @@ def stride_period_frames(rel, fps, min_s=0.45, max_s=1.6):
     lags = np.arange(max(2, int(min_s * fps)), min(int(max_s * fps), int(F / 1.5)) + 1)
     if len(lags) < 3:
         return float("nan")
-    d = np.full(len(lags), np.nan)
-    for i, L in enumerate(lags):
-        diff = y[L:] - y[:-L]
-        ok = np.isfinite(diff)
-        if ok.sum() > 10:
-            d[i] = np.mean(diff[ok] ** 2)
+    d = np.array([_lag_mismatch(y, L) for L in lags])
     if not np.isfinite(d).any():
         return float("nan")
     i = int(np.nanargmin(d))

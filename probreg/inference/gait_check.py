@@ -34,7 +34,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CADENCE_TOLERANCE", "CONTACT_NUMBERS", "HALF_LAG_RATIO", "gait_check", "pattern_stride_frames"]
+__all__ = ["CADENCE_TOLERANCE", "CONTACT_NUMBERS", "HALF_LAG_RATIO", "gait_check", "pattern_cadence_spm",
+           "pattern_stride_frames"]
 
 #: the gait numbers that rest on the detected contacts (``speed_mps`` does not: the ground track)
 CONTACT_NUMBERS = ("cadence_spm", "step_length_m", "contact_time_s", "flight_time_s",
@@ -79,6 +80,16 @@ def pattern_stride_frames(keypoints_px, fps, lags=None):
     return period / 2 if np.isfinite(half) and np.isfinite(whole) and half < HALF_LAG_RATIO * whole else period
 
 
+def pattern_cadence_spm(stride_frames, fps):
+    """Steps per minute of a stride period in frames (two steps a stride); NaN without one.
+
+    >>> round(pattern_cadence_spm(34.0, 50.0), 1), pattern_cadence_spm(None, 50.0)
+    (176.5, nan)
+    """
+    sf = float("nan") if stride_frames is None else float(stride_frames)
+    return 120.0 * fps / sf if np.isfinite(sf) and sf > 0 else float("nan")
+
+
 def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE):
     """The gait verdict: ``(gait, status, reasons)``, ``gait`` a copy of the summary
     ({name: {"median", "lo", "hi", "unit"}}) whose contact-based numbers carry
@@ -101,8 +112,7 @@ def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE):
     if not np.isfinite(cadence) or cadence <= 0:
         reasons.append("touchdowns too few for a cadence")
     else:
-        sf = float("nan") if stride_frames is None else float(stride_frames)
-        pattern = 120.0 * fps / sf if np.isfinite(sf) and sf > 0 else float("nan")
+        pattern = pattern_cadence_spm(stride_frames, fps)
         if np.isfinite(pattern) and abs(cadence / pattern - 1.0) > tolerance:
             reasons.append(f"cadence {cadence:.0f} steps/min from the contacts, {pattern:.0f} from the stride pattern")
         contact, step = _median(gait, "contact_time_s"), 60.0 / cadence
