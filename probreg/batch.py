@@ -53,7 +53,7 @@ MANIFEST_COLUMNS = {
     "det_model": ("det_model", "path"), "athlete": ("athlete", str), "fps": ("fps", float),
     "seed": ("seed", int), "walkers": ("walkers", int), "max_steps": ("max_steps", int), "draws": ("draws", int),
     "dist": ("dist", str), "min_score": ("min_score", float), "name": ("name", str),
-    "height_allowance": ("height_allowance", float),
+    "height_allowance": ("height_allowance", float), "shot": ("shot", str),
 }
 
 #: columns of ``summary.csv``
@@ -71,7 +71,7 @@ def _defaults():
     return {"stature": None, "stature_sd": None, "height_m": None, "height_log_sd": None,
             "camera_side": run.camera_side, "model": None, "det_model": None, "athlete": None, "fps": None,
             "seed": smp.seed, "walkers": smp.n_walkers, "max_steps": smp.max_steps, "draws": smp.n_draws,
-            "dist": None, "min_score": run.min_score, "height_allowance": run.height_allowance}
+            "dist": None, "min_score": run.min_score, "height_allowance": run.height_allowance, "shot": run.shot}
 
 
 #: options of a batch entry with their ``probreg run`` defaults
@@ -138,6 +138,8 @@ def read_manifest(path, base_options=None):
                 name = value
             elif dest == "camera_side" and value not in ("auto", "main", "far"):
                 raise ClipFormatError(f"{path}: line {k}, column 'camera_side': {value!r} is not auto, main or far")
+            elif dest == "shot" and not (value in ("longest", "all") or value.isdigit()):
+                raise ClipFormatError(f"{path}: line {k}, column 'shot': {value!r} is not longest, all or a number")
             else:
                 opts[dest] = value
         name = name or (clip.stem if clip.suffix else clip.name)
@@ -196,7 +198,8 @@ def _run_options(o):
     if not (math.isfinite(allowance) and allowance >= 0):
         raise ValueError(f"height_allowance must be a finite number >= 0, got {o['height_allowance']!r}")
     return RunOptions(priors=priors, sampler=sampler, dist=dist, min_score=float(o["min_score"]),
-                      camera_side=o["camera_side"], overwrite=False, height_allowance=allowance)
+                      camera_side=o["camera_side"], overwrite=False, height_allowance=allowance,
+                      shot=str(o.get("shot", "longest")))
 
 
 def run_entry(entry: BatchEntry, out_dir, digest):

@@ -37,14 +37,7 @@ def _prepare_out(out, inputs=(), overwrite=False):
 
 
 def _cmd_synth(args):
-    from .sim import (
-        PRESETS,
-        SUITES,
-        config_from_preset,
-        synthesize,
-        write_clip,
-        write_suite,
-    )
+    from .sim import PRESETS, SUITES, config_from_preset, synthesize, write_clip, write_suite
 
     if args.list:
         print("presets:", ", ".join(sorted(PRESETS)))
@@ -73,11 +66,7 @@ def _cmd_synth(args):
         from dataclasses import replace
 
         base = config_from_preset(args.preset, args.seed).camera
-        cam_kw = {}
-        if args.camera_height is not None:
-            cam_kw["height_m"] = args.camera_height
-        if args.distance is not None:
-            cam_kw["distance_m"] = args.distance
+        cam_kw = {k: v for k, v in (("height_m", args.camera_height), ("distance_m", args.distance)) if v is not None}
         if args.fov is not None:
             if not 0 < args.fov < 180:
                 raise ValueError(f"field of view must lie in (0, 180) degrees, got {args.fov}")
@@ -120,7 +109,7 @@ def _run_options(args):
 
     return RunOptions(priors=priors, sampler=sampler, dist=_parse_dist(args.dist), min_score=args.min_score,
                       overwrite=args.overwrite, camera_side=args.camera_side, progress=_progress(args),
-                      branch=args.branch, height_allowance=args.height_allowance,
+                      branch=args.branch, height_allowance=args.height_allowance, shot=args.shot,
                       lens=args.lens, lens_prior=LensPrior(sd=args.lens_k1_sd))
 
 
@@ -194,6 +183,13 @@ def _nonneg_float(text):
     if not 0 <= (v := float(text)) < float("inf"):
         raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
     return v
+
+
+def _shot(text):
+    """argparse type of ``--shot``: 'longest', 'all' or a shot's number."""
+    if text in ("longest", "all") or text.isdigit():
+        return text
+    raise argparse.ArgumentTypeError(f"must be longest, all or a shot's number (0, 1, ...), got {text!r}")
 
 
 def _parse_dist(text):
@@ -419,6 +415,8 @@ def _add_run_options(p):
                    help="side of the track the camera stands on: main (home straight stands, runner goes "
                         "left to right), far (across the infield); auto decides by evidence (default; "
                         "clip.json 'camera_side' is used when given)")
+    g.add_argument("--shot", type=_shot, default="longest", help="with camera cuts in the clip: the shot estimated: "
+                   "longest (default), a shot's number (0-based), or all (the clip as one camera: unreliable)")
     g.add_argument("--height-allowance", type=_nonneg_float, default=0.008, metavar="SD",
                    help="systematic allowance on the camera height (sd of log height; default 0.008: track tolerances)")
     g.add_argument("--branch", choices=("auto", "narrow", "wide"), default="auto",

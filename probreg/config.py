@@ -40,7 +40,7 @@ def _defaults():
             "draws_per_noise_copy": smp.draws_per_noise_copy,
             "seed": smp.seed, "moves": smp.moves, "camera_side": run.camera_side, "branch": run.branch,
             "min_score": run.min_score, "lens": run.lens,
-            "lens_k1_sd": run.lens_prior.sd, "height_allowance": run.height_allowance}
+            "lens_k1_sd": run.lens_prior.sd, "height_allowance": run.height_allowance, "shot": run.shot}
 
 
 _D = _defaults()
@@ -72,6 +72,8 @@ CONFIG_KEYS = (
         "known lens distortion [k1, k2, p1, p2, k3] (OpenCV order); [] = none assumed"),
     Key("camera", "side", "camera_side", str, _D["camera_side"],
         "'auto' (decided by the athlete's motion), 'main' (home-straight stands) or 'far' (across the infield)"),
+    Key("camera", "shot", "shot", str, _D["shot"],
+        "with camera cuts in a clip: the shot estimated: 'longest', 'all' (one camera: unreliable) or its number"),
     Key("camera", "branch", "branch", str, _D["branch"],
         "family branch: 'auto' (decided by evidence), 'narrow' (long lens far away) or 'wide' (close, steep)"),
     Key("detection", "model", "model", str, "", "ONNX pose model for videos (YOLO-pose or top-down); '' = none"),
@@ -158,6 +160,8 @@ def _convert(path, key, value):
             raise ConfigError(f"{where} must be a string, got {value!r}")
         if key.dest == "camera_side" and value not in ("auto", "main", "far"):
             raise ConfigError(f"{where} must be 'auto', 'main' or 'far', got {value!r}")
+        if key.dest == "shot" and not (value in ("longest", "all") or value.isdigit()):
+            raise ConfigError(f"{where} must be 'longest', 'all' or a shot's number, got {value!r}")
         if key.dest == "lens" and value not in ("infer", "none"):
             raise ConfigError(f"{where} must be 'infer' or 'none', got {value!r}")
         return value or None  # '' = not given

@@ -44,10 +44,11 @@ from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationErro
 from .inference.sampling import SamplerSettings
 from .inference.evidence import BRANCHES, BranchChoice, laplace_log_evidence
 from .inference.verdict import bone_length_cv, clip_verdict, knee_band_width, knee_flexion_peak, view_obliquity
-from .inference.parallel import default_workers, fork_call
+from .inference.parallel import default_workers, fork_call, warm_imports
 from .io.clip import FPS_RANGE, ClipFormatError, load_clip, write_json
 from .io.frames import has_frames
 from .io.output import atomic_output_dir, prepare_output
+from .lanes.shots import restrict_clip
 from .io.opensim import write_mot, write_trc
 from .io.results import write_angles_csv, write_gait_cycle_csv, write_joints_npz
 
@@ -82,6 +83,9 @@ class RunOptions:
     height_allowance: float = HEIGHT_SYSTEMATIC_SD
     # progress(desc, total) -> a bar with update(n) and close() (e.g. tqdm); None: no bars
     progress: object = None
+    # the camera shot estimated when the clip has cuts (probreg.lanes.shots): "longest", "all" (the
+    # clip as one camera: verdict reason "camera cut") or a shot's number (0-based)
+    shot: str = "longest"
 
 
 @dataclass
@@ -119,25 +123,6 @@ def _arviz():
         warnings.simplefilter("ignore", FutureWarning)  # ArviZ announces its 1.0 refactor on import
         import arviz as az
     return az
-
-
-def _warm_imports():
-    """Import what the rest of a run needs (scipy.signal, ArviZ, h5netcdf, matplotlib: ~2.5 s) in
-    a thread while the lanes are found; join it before any fork (an import lock could hang it)."""
-    import threading
-
-    def work():
-        import importlib
-
-        for name in ("scipy.signal", "h5netcdf", "arviz", "matplotlib.figure", "matplotlib.backends.backend_agg"):
-            try:
-                importlib.import_module(name)
-            except Exception:  # noqa: BLE001 -- only a head start: the real import reports it
-                pass
-
-    thread = threading.Thread(target=work, name="probreg-imports", daemon=True)
-    thread.start()
-    return thread
 
 
 def posterior_inference_data(sampler, burn=0, keypoints_px=None, frame_lanes=None, names=PARAM_NAMES):
@@ -255,6 +240,7 @@ def _write_uncalibrated(clip, reg, side, out_dir, options, error, t0, log, input
         write_json(tmp / "camera.json", camera_json([None] * F, float("nan"), F))
         write_json(tmp / "run.json", {"verdict": "uncalibrated", "verdict_reasons": reasons, "error": message,
                                      "camera_side": side.to_dict(), "input_notes": list(clip.notes),
+                                     "shots": reg.shots.to_dict() if reg.shots is not None else None,
                                      "timings_s": timings, "frame_status": status, "gait_verdict": "uncalibrated",
                                      "keypoint_status": detection_status(clip.keypoints_px),
                                      "lane_status_counts": counts, "gait_verdict_reasons": []})
@@ -369,6 +355,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         raise ValueError(f"lens must be 'infer' or 'none', got {options.lens!r}")
     if options.branch not in (*BRANCHES, "auto"):
         raise ValueError(f"branch must be auto, narrow or wide, got {options.branch!r}")
+    if str(options.shot) not in ("longest", "all") and not str(options.shot).isdigit():
+        raise ValueError(f"shot must be 'longest', 'all' or a shot's number, got {options.shot!r}")
     inputs = [clip_dir, *protect]
     prepare_output(out_dir, inputs=inputs, overwrite=options.overwrite)  # before any work
     clip = load_clip(clip_dir, min_score=options.min_score)
@@ -384,10 +372,13 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                          f"the model needs at least 10")
     given = requested_side(options.camera_side, clip.meta, clip.path / "clip.json")
     warm = []
-    reg = register_clip(clip, progress=options.progress, started=lambda: warm.append(_warm_imports()),
-                        background=fork_call if default_workers() >= 2 else None)
+    reg = register_clip(clip, progress=options.progress, started=lambda: warm.append(warm_imports()),
+                        background=fork_call if default_workers() >= 2 else None, shot=options.shot)
     t1 = time.perf_counter()
     log(f"lanes: {reg.status_counts()} ({t1 - t0:.1f} s)")
+    if reg.shots.split:  # one static camera per shot: the other shots' frames are left out, and said so
+        clip = restrict_clip(clip, reg.shots)
+        log(f"warning: {clip.notes[-1]}")
     if (note := wrong_size_note(reg)) is not None:  # frames of another size are left out, and said so
         log(f"warning: {note}")
         clip = replace(clip, notes=(*clip.notes, note))
@@ -452,8 +443,9 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     diag["knee_flexion_peak_deg"] = knee_peak = knee_flexion_peak(summ, clip.fps)
     diag["cadence_stride_pattern_spm"] = pattern_cadence_spm(model.stride_frames(), clip.fps)  # gait_check's
     diag["left_right_exchanged"] = exchanged = {"legs": float(model.exchanged[:, 0].mean())}  # the arms: never
-    verdict, reasons = clip_verdict(
-        clip.n_frames, calibrated=sum(c is not None for c in cam_list), frames_with_angles=n_angle,
+    verdict, reasons = clip_verdict(  # over the frames of the shot estimated (all but with --shot all)
+        reg.shots.frames[1] - reg.shots.frames[0], calibrated=sum(c is not None for c in cam_list),
+        frames_with_angles=n_angle, cuts=reg.shots.cuts if reg.shots.chosen is None else None,
         rhat=diag["rhat_height"], ess=diag["ess_height"], log_height_draws=flat[:, 0],
         log_height_prior_sd=getattr(prior_h, "log_sd", None), side=side, bone_cv_pct=bone_length_cv(joints_med),
         speed_mps=gait_s.get("speed_mps", {}).get("median"),
@@ -487,7 +479,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         write_json(tmp / "run.json", {"verdict": verdict, "verdict_reasons": reasons,
                                      "gait_verdict": gait_status, "gait_verdict_reasons": gait_reasons,
                                      "camera_side": side.to_dict(), "branch": branch.to_json(),
-                                     "input_notes": list(clip.notes), **extra,
+                                     "shots": reg.shots.to_dict(), "input_notes": list(clip.notes), **extra,
                                      "diagnostics": diag, "timings_s": timings, "height_m": height,
                                      "height_member_sensitivity": sensitivity,
                                      "height_allowance": options.height_allowance, "athlete": athlete,

@@ -18,11 +18,15 @@ from ..io.clip import Clip
 from ..lanes import (
     FrameLanes,
     LaneDetectorConfig,
+    colour_histogram,
+    histogram_change,
     smooth_vanishing_points,
+    split_shots,
     line_straightness_px,
     track_lanes,
     undistort_frame_lanes,
 )
+from .cuts import find_clip_cuts
 from .side import camera_side_evidence, forward_px_of
 from .family import CalibrationError, CalibrationFamily, SequenceCalibration
 
@@ -93,6 +97,9 @@ class ClipRegistration:
     forward_px: np.ndarray
     image_size: tuple
     lane_width_m: float = 1.22
+    #: the clip's camera shots and the one estimated (:func:`probreg.lanes.shots.split_shots`;
+    #: None when the registration was not made from the clip's frames)
+    shots: object = None
 
     def status_counts(self):
         out = {}
@@ -537,7 +544,7 @@ def wrong_size_note(reg: ClipRegistration):
 
 
 def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(), smooth=True,
-                  mask_athlete=True, progress=None, background=None, started=None):
+                  mask_athlete=True, progress=None, background=None, started=None, shot="longest"):
     """Detect lanes in every frame of a clip and build the per-frame families.
 
     With ``mask_athlete`` and the clip's keypoints, line evidence near the athlete is
@@ -556,6 +563,12 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
     part's (:func:`probreg.lanes.tracking.stitch_tracks`).
     ``started()``, when given, is called once the background work is started (threads must
     start only then: a fork while another thread holds an import lock could hang).
+
+    Camera cuts are found from the frames' colour changes (:mod:`probreg.lanes.shots`); the
+    registration's ``shots`` says where they are.  ``shot`` (``"longest"``, ``"all"`` or a shot's
+    index) picks the frames whose lanes are used: the frames of the other shots get the lane
+    status ``other_shot`` (no lines), so that one static camera is estimated from one shot.
+    Raises ``ValueError`` for a ``shot`` the clip does not have.
     """
     from ..io.frames import iter_frames
     from ..lanes.tracking import stitch_tracks
@@ -592,7 +605,27 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
     fls = [replace(fl, image_size=clip.image_size,
                    status="missing_image" if fl.frame in missing or i in missing else fl.status)
            if fl.status == "bad_image" else fl for i, fl in enumerate(fls)]
-    return register_frames(fls, clip.image_size, (1.0, 0.0), clip.lane_width_m, smooth=smooth)
+    if mid < n:  # the second part compared its first frame with nothing: compare across the seam
+        fls[mid] = replace(fls[mid], extra={**fls[mid].extra, "colour_change": _seam_change(clip, mid)})
+    change = [fl.extra.get("colour_change", np.nan) for fl in fls]
+    # the lanes' own families (before the vanishing-point smoother, which would blur a cut)
+    raw = [_family_or_none(fl, (1.0, 0.0), clip.lane_width_m) for fl in fls]
+    cuts, info = find_clip_cuts(change, raw, clip.image_size)
+    shots = split_shots(change, len(fls), shot, cuts=cuts, steps=info["steps"], vetoed=info["vetoed"])
+    if shots.split:
+        a, b = shots.frames
+        fls = [fl if a <= i < b else replace(fl, status="other_shot", lines=(), vanishing_point=None, vp_cov=None)
+               for i, fl in enumerate(fls)]
+    reg = register_frames(fls, clip.image_size, (1.0, 0.0), clip.lane_width_m, smooth=smooth)
+    reg.shots = shots
+    return reg
+
+
+def _seam_change(clip, i):
+    """The colour change of frame ``i`` from frame ``i - 1`` (:func:`probreg.lanes.shots.histogram_change`)."""
+    from ..io.frames import read_frame
+
+    return histogram_change(colour_histogram(read_frame(clip, i - 1)), colour_histogram(read_frame(clip, i)))
 
 
 def camera_json(cameras, height_m, n_frames, lo=None, hi=None):

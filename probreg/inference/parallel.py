@@ -11,7 +11,7 @@ from __future__ import annotations
 
 import os
 
-__all__ = ["default_workers", "fork_map", "fork_call", "stop_flag"]
+__all__ = ["default_workers", "fork_map", "fork_call", "stop_flag", "warm_imports"]
 
 #: the function forked workers run on their chunk (set only while a pool runs)
 _FORKED = None
@@ -154,3 +154,22 @@ def stop_flag():
         return mp.get_context("fork").Event() if _can_fork() else threading.Event()
     except OSError:  # no shared semaphores on this system
         return threading.Event()
+
+
+def warm_imports():
+    """Import what the rest of a run needs (scipy.signal, ArviZ, h5netcdf, matplotlib: ~2.5 s) in
+    a thread while the lanes are found; join it before any fork (an import lock could hang it)."""
+    import threading
+
+    def work():
+        import importlib
+
+        for name in ("scipy.signal", "h5netcdf", "arviz", "matplotlib.figure", "matplotlib.backends.backend_agg"):
+            try:
+                importlib.import_module(name)
+            except Exception:  # noqa: BLE001 -- only a head start: the real import reports it
+                pass
+
+    thread = threading.Thread(target=work, name="probreg-imports", daemon=True)
+    thread.start()
+    return thread

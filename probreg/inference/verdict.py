@@ -139,6 +139,12 @@ reason of its own, a short machine-readable string with the number that triggere
     called left is then close to a guess, and the left and right angles may be each other's.
     (Probreg's generator swaps single frames, 0.3 %; the validation clips about 1 %.  A real pose
     model on probreg's renders of tuning set-ups swapped 30-60 % of the frames.)
+``camera cut at frame(s) i, ... (taken as one camera)``
+    the clip switches from one camera to another (:mod:`probreg.lanes.shots`) and was estimated
+    as one static camera anyway (``--shot all``).  By default probreg estimates the longest shot
+    alone (the other frames: status ``other_shot``), and this reason does not arise; taken as
+    one, a cut from a 9 m main-stand camera 30 m away to an 11 m one 40 m away gave knee errors
+    of 38 deg with every other check passing.
 """
 
 from __future__ import annotations
@@ -249,6 +255,11 @@ REASON_HELP = {
         ("the camera looks at the runner from far off the side: much of the legs' motion runs along "
          "the rays, and knee errors average ~4 deg even with the true camera"),
         "prefer a camera nearer the side of the runner (a main-stand or long-lens view)",
+    ),
+    "camera cut": (
+        ("the clip switches cameras, and it was estimated as one static camera (--shot all): the "
+         "camera height is pulled between two cameras, and every angle may be far off"),
+        "run one shot at a time (the default estimates the longest; --shot N picks shot N)",
     ),
 }
 
@@ -445,7 +456,7 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
                  log_height_prior_sd=None, side=None, bone_cv_pct=None, speed_mps=None,
                  stature_draws=None, stature_prior=None, branch=None, member_sensitivity=None,
                  lanes_agree=None, noise_rho=None, knee_band_deg=None, obliquity_deg=None, knee_peak_deg=None,
-                 left_right_exchanged=None, thresholds: VerdictThresholds = VerdictThresholds()):
+                 left_right_exchanged=None, cuts=None, thresholds: VerdictThresholds = VerdictThresholds()):
     """The clip verdict and its reasons.
 
     Parameters
@@ -491,6 +502,9 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
     left_right_exchanged : dict, optional
         ``{"legs": fraction}`` of the frames whose left/right labels were exchanged
         (:func:`probreg.filtering.relabel_left_right`; the arms are not relabelled).
+    cuts : sequence of int, optional
+        Camera cuts (first frames of new shots) inside the frames estimated as one camera
+        (``--shot all``; :mod:`probreg.lanes.shots`).
 
     Returns
     -------
@@ -516,6 +530,8 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
     ('unreliable', ['knee flexion peak 56 deg'])
     >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, left_right_exchanged={"legs": 0.42})
     ('unreliable', ['left/right labels unsure (legs exchanged in 42 % of frames)'])
+    >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, cuts=(40,))
+    ('unreliable', ['camera cut at frame 40 (taken as one camera)'])
     """
     t = thresholds
     reasons, uncal = [], False
@@ -576,5 +592,8 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
     for limb, frac in (left_right_exchanged or {}).items():
         if frac is not None and np.isfinite(frac) and frac > t.max_exchanged_fraction:
             reasons.append(f"left/right labels unsure ({limb} exchanged in {100 * frac:.0f} % of frames)")
+    if cuts:
+        reasons.append(f"camera cut at frame{'s' if len(cuts) > 1 else ''} {', '.join(map(str, cuts))} "
+                       "(taken as one camera)")
     verdict = "uncalibrated" if uncal else ("unreliable" if reasons else "ok")
     return verdict, reasons

@@ -1,12 +1,14 @@
 """Lane lines and their vanishing point (seed paper, Sec. 3.1): the few parallel lane lines of
 the straight that a zoomed-in broadcast camera sees are found, measured to sub-pixel accuracy,
 followed from frame to frame, and fitted as a pencil through one vanishing point with integer
-line indices.  Failures are per-frame statuses (:data:`STATUSES`), never exceptions.
+line indices.  Camera cuts between the frames are found from their colour changes
+(:mod:`probreg.lanes.shots`).  Failures are per-frame statuses (:data:`STATUSES`), never exceptions.
 """
 
 from .detection import detect_lanes
 from .mask import athlete_mask
 from .overlay import draw_lanes
+from .shots import ShotSplit, colour_histogram, find_cuts, histogram_change, split_shots
 from .tracking import track_lanes
 from .types import STATUSES, FrameLanes, LaneDetectorConfig, LaneLine
 from .undistort import line_straightness_px, undistort_frame_lanes
@@ -16,4 +18,5 @@ __all__ = [
     "LaneDetectorConfig", "LaneLine", "FrameLanes", "STATUSES", "athlete_mask",
     "lines_through_point", "assign_line_indices", "smooth_vanishing_points", "track_lanes",
     "undistort_frame_lanes", "line_straightness_px", "draw_lanes", "detect_lanes",
+    "ShotSplit", "colour_histogram", "histogram_change", "find_cuts", "split_shots",
 ]

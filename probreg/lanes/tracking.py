@@ -20,6 +20,7 @@ from .detection import (
     detect_lanes,
 )
 from .mask import athlete_mask
+from .shots import colour_histogram, histogram_change
 from .types import FrameLanes, LaneDetectorConfig
 
 __all__ = ["track_lanes", "stitch_tracks"]
@@ -45,12 +46,16 @@ def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypo
     Returns
     -------
     list of FrameLanes
+        Each with ``extra["colour_change"]``: the change of the frame's colour distribution from
+        the previous frame's (:func:`probreg.lanes.shots.histogram_change`; NaN for the first
+        frame and next to an unreadable one), the evidence for camera cuts.
     """
     out = []
     prev = last_ok = None
     next_id = 0
-    prev_small = window = None
+    prev_small = window = prev_hist = None
     for k, (i, img) in enumerate(frames):
+        hist = colour_histogram(img)
         fl = None
         shift = np.zeros(2)
         small = None
@@ -97,9 +102,9 @@ def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypo
             ref = prev if prev is not None else last_ok
             fl, next_id = _assign_track_ids(fl, ref, next_id, shift if ref is prev else np.zeros(2))
             last_ok = fl
-        out.append(fl)
+        out.append(replace(fl, extra={**fl.extra, "colour_change": histogram_change(prev_hist, hist)}))
         prev = fl if fl.ok else None
-        prev_small = small
+        prev_small, prev_hist = small, hist
     return out
 
 

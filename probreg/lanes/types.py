@@ -25,7 +25,9 @@ import numpy as np
 __all__ = ["LaneDetectorConfig", "LaneLine", "FrameLanes", "STATUSES"]
 
 
-STATUSES = ("ok", "too_few_lines", "no_straight", "no_lines", "bad_image", "missing_image")
+#: ``other_shot``: the frame belongs to another camera shot than the one estimated (its lanes are
+#: not used; :mod:`probreg.lanes.shots`)
+STATUSES = ("ok", "too_few_lines", "no_straight", "no_lines", "bad_image", "missing_image", "other_shot")
 
 @dataclass(frozen=True)
 class LaneDetectorConfig:

@@ -34,10 +34,14 @@ def cut_clip(tmp_path_factory):
 
 
 def test_lanes_that_do_not_fit_the_camera_make_the_clip_unreliable(cut_clip, tmp_path):
+    # taken as one camera (--shot all; by default the cuts at 20 and 40 are found and one shot
+    # is estimated: tests/pipeline/test_camera_cuts.py), the lanes of the two cameras disagree
     out = tmp_path / "res"
-    code = main(["run", str(cut_clip), "--out", str(out)] + FAST_RUN)
+    code = main(["run", str(cut_clip), "--out", str(out), "--shot", "all"] + FAST_RUN)
     run = json.loads((out / "run.json").read_text())
     assert code == 3 and run["verdict"] == "unreliable"
+    assert run["shots"]["cuts"] == [20, 40]
+    assert "camera cut at frames 20, 40 (taken as one camera)" in run["verdict_reasons"]
     found = [r for r in run["verdict_reasons"] if r.startswith("lanes_agree_frames")]
     assert len(found) == 1, run["verdict_reasons"]
     n, m = map(int, re.match(r"lanes_agree_frames (\d+)/(\d+)$", found[0]).groups())
