@@ -29,6 +29,7 @@ BENCHMARKS = {
     "video": "probreg.bench.video:run",
     "speed": "probreg.bench.speed:run",
     "batch": "probreg.bench.batch:run",
+    "cuts": "probreg.bench.cuts:run",
 }
 
 

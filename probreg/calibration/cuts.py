@@ -38,8 +38,9 @@ __all__ = ["PROBE_FOV_DEG", "GEOMETRIC_CUT", "GEOMETRIC_NOISE_RATIO", "STEP_WIND
            "family_signature", "signature_noise",
            "family_steps", "geometric_cuts", "find_clip_cuts"]
 
-#: horizontal fields of view (deg) at which every frame's family is evaluated
-PROBE_FOV_DEG = (3.0, 6.0, 12.0, 24.0, 48.0)
+#: horizontal fields of view (deg) at which every frame's family is evaluated (from the longest
+#: broadcast lenses, ~1 deg, to wide ones; a lens far from every probe hardly moves the signature)
+PROBE_FOV_DEG = (1.0, 2.0, 4.0, 8.0, 16.0, 32.0)
 #: a step (change of the log family height at fixed fields of view) above this is a cut ...
 GEOMETRIC_CUT = 0.10
 #: ... and above this many times the clip's median change from one frame with lanes to the next
@@ -194,9 +195,18 @@ def find_clip_cuts(colour_change, families, image_size):
     finite = steps[np.isfinite(steps)]
     same = max(GEOMETRIC_CUT / 2, 3.0 * float(np.median(finite))) if finite.size else GEOMETRIC_CUT / 2
     cuts, vetoed = set(), []
+    lanes = np.flatnonzero(np.isfinite(sig).any(axis=1))
+    change = np.asarray(colour_change, float)
     for g in geo:
         near = [c for c in colour if abs(c - g) <= STEP_WINDOW]
-        cuts.add(min(near, key=lambda c: abs(c - g)) if near else g)
+        if near:  # the colours place it to the frame
+            cuts.add(min(near, key=lambda c: abs(c - g)))
+            continue
+        # frames without lanes just before it: the cut lies among them, where the picture changes most
+        prev = lanes[lanes < g]
+        span = np.arange(prev[-1] + 1 if prev.size else 0, g + 1)
+        inside = change[span] if span.size and span[-1] < len(change) else np.array([])
+        cuts.add(int(span[int(np.nanargmax(inside))]) if np.isfinite(inside).any() else g)
     for c in colour:
         if c in cuts or any(abs(c - g) <= STEP_WINDOW for g in geo):
             continue

@@ -9,6 +9,7 @@ import pytest
 from probreg.calibration import CalibrationFamily
 from probreg.calibration.cuts import (
     GEOMETRIC_CUT,
+    PROBE_FOV_DEG,
     family_signature,
     family_steps,
     find_clip_cuts,
@@ -38,10 +39,10 @@ def shots():
 def test_a_cut_between_two_cameras_is_found_at_its_frame(shots):
     fam, same, size = shots
     sig = family_signature(fam, size)
-    assert sig.shape == (60, 5) and np.isfinite(sig).mean() > 0.9
+    assert sig.shape == (60, len(PROBE_FOV_DEG)) and np.isfinite(sig).mean() > 0.8
     steps = family_steps(sig)
     assert np.nanmax(steps[np.r_[1:30, 41:60]]) < GEOMETRIC_CUT / 3  # the camera pans and zooms
-    assert steps[35] > 2 * GEOMETRIC_CUT
+    assert steps[35] > 1.5 * GEOMETRIC_CUT
     assert geometric_cuts(sig) == [35]
     cuts, info = find_clip_cuts(np.full(60, 0.003), fam, size)  # colours alike: the lanes find it
     assert cuts == [35] and info["vetoed"] == []

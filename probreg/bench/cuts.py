@@ -1,0 +1,161 @@
+"""Camera cuts: are they found, and what does estimating one shot give?
+
+1. **The cut set** (:mod:`probreg.sim.cuts`: 20 clips of one runner filmed by two cameras of the
+   held-out set's kinds, cut between 35 % and 65 % of the clip; half cut to another set-up, half
+   to the same kind of camera moved by 15-40 %; :data:`~probreg.sim.cuts.CUT_SEEDS` fixed before
+   the detection was tuned, never tuned on).  Every clip goes through the command line twice, in
+   fresh processes: ``probreg run CLIP --out OUT --seed 0`` (the default: cuts found, the longest
+   shot estimated) and with ``--shot all`` (the clip taken as one camera, as probreg did before
+   cuts were found).  Scored: the cut found at its frame, cuts found where there is none, the knee
+   error of the posterior median over the frames with angles (against the runner's truth), the
+   camera height against the true camera of the frames estimated, and the verdict.
+2. **Clips without a cut**: the lane step alone (:func:`probreg.calibration.register_clip`, where
+   the cuts are found) on the independent validation clips (``shared/data/validation``), the
+   held-out set (:mod:`probreg.sim.heldout`) and the benchmark's ``run_a``: any cut found there is
+   a false one; the largest colour change and lane step show the margins to the thresholds.
+"""
+
+from __future__ import annotations
+
+import json
+import tempfile
+import warnings
+from pathlib import Path
+
+import numpy as np
+
+from ..geometry import joint_angles
+from ..io.clip import load_groundtruth
+from .common import BenchReport, find_shared_data, md_table
+from .validation import _heldout_clips, _run_cli
+
+__all__ = ["run", "score_cut_result"]
+
+
+def score_cut_result(clip_dir: Path, out_dir: Path):
+    """Scores of one result of a cut clip: the cuts and shot of ``run.json``, the knee error over
+    the frames with angles, the camera height against the true camera of the frames estimated."""
+    clip_dir, out_dir = Path(clip_dir), Path(out_dir)
+    run = json.loads((out_dir / "run.json").read_text())
+    shots = run.get("shots") or {}
+    gt = load_groundtruth(clip_dir)
+    truth = joint_angles(gt.joints3d_track_m)
+    est = joint_angles(np.load(out_dir / "joints3d.npz")["median"].astype(float))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        err = np.concatenate([np.abs(est[k] - truth[k]) for k in ("knee_l", "knee_r")])
+    ok = np.isfinite(err)
+    a, b = shots.get("frames_estimated", [0, len(gt.cameras)])
+    h_true = float(np.median([c.C[2] for c in gt.cameras[a:b]]))
+    cam = json.loads((out_dir / "camera.json").read_text())["height_m"]
+    h = cam.get("median")
+    h_ok = h is not None and np.isfinite(h)
+    return {"cuts": shots.get("cuts", []), "frames": [a, b], "knee_deg": float(np.mean(err[ok])) if ok.any() else
+            float("nan"), "frames_with_knee": int(ok.sum() // 2), "height_true": h_true,
+            "height_err_pct": 100 * (h / h_true - 1) if h_ok else float("nan"),
+            "height_in": bool(h_ok and cam["lo"] <= h_true <= cam["hi"]),
+            "verdict": run.get("verdict", "n/a"), "reasons": run.get("verdict_reasons", [])}
+
+
+def _cut_clips(root):
+    from ..sim.cuts import CUT_SEEDS, write_cut_clip
+
+    root = Path(root)
+    paths = []
+    for seed in CUT_SEEDS:
+        path = root / f"cut_{seed}"
+        if not (path / "clip.json").exists():
+            write_cut_clip(path, seed)
+        paths.append(path)
+    return paths
+
+
+def _no_cut_rows(clips):
+    from ..calibration import register_clip
+    from ..io.clip import load_clip
+
+    rows = []
+    for clip in clips:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore")
+            shots = register_clip(load_clip(clip)).shots
+        rows.append([clip.name, ", ".join(map(str, shots.cuts)) or "none", shots.change_max, shots.step_max,
+                     ", ".join(map(str, shots.vetoed)) or "none"])
+    return rows
+
+
+def run(args):
+    rep = BenchReport("cuts", "Camera cuts: found from the lanes and the colours; one shot estimated")
+    rep.add(__doc__.split("\n", 1)[1].strip())
+    with tempfile.TemporaryDirectory(prefix="probreg-bench-cuts-") as tmp:
+        root = Path(getattr(args, "suite_dir", None) or Path(tmp) / "cuts")
+        keep = Path(args.keep_outputs) if getattr(args, "keep_outputs", None) else Path(tmp) / "out"
+        rows, found, knees, knees_all, heights, walls = [], 0, [], [], [], []
+        flagged = flagged_all = false_cuts = 0
+        clips = _cut_clips(root)
+        for clip in clips:
+            meta = json.loads((clip / "clip.json").read_text())["generator"]
+            res = {}
+            for mode, extra in (("shot", ()), ("all", ("--shot", "all"))):
+                out = keep / f"{clip.name}_{mode}"
+                code, dt, last = _run_cli(clip, out, extra)
+                res[mode] = score_cut_result(clip, out) if (out / "run.json").exists() else None
+                res[mode + "_exit"], res[mode + "_wall"] = code, dt
+            s, a = res["shot"], res["all"]
+            if s is None or a is None:
+                rows.append([clip.name, meta["shots"], meta["cut"], "failed", "", "", "", "", "", "", ""])
+                continue
+            hit = meta["cut"] in s["cuts"]
+            found += hit
+            false_cuts += len([c for c in s["cuts"] if c != meta["cut"]])
+            knees.append(s["knee_deg"])
+            knees_all.append(a["knee_deg"])
+            heights.append(abs(s["height_err_pct"]))
+            walls.append(res["shot_wall"])
+            flagged += s["verdict"] != "ok"
+            flagged_all += a["verdict"] != "ok"
+            rows.append([clip.name, meta["shots"], meta["cut"], ", ".join(map(str, s["cuts"])) or "none",
+                         f"{s['frames'][0]}-{s['frames'][1] - 1}", s["knee_deg"], s["height_err_pct"],
+                         "yes" if s["height_in"] else "no", s["verdict"] + (f" ({'; '.join(s['reasons'])})"
+                                                                            if s["reasons"] else ""),
+                         a["knee_deg"], a["verdict"], res["shot_wall"]])
+        n = len(clips)
+        rep.add("## The cut set (20 clips, seeds fixed before tuning)\n\n" + md_table(
+            ["clip", "shots", "true cut", "cuts found", "frames estimated", "knee err deg", "height err %",
+             "height in 90 %", "verdict (reasons)", "as one camera: knee err deg", "as one camera: verdict",
+             "wall s"], rows))
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            summary = [
+                ["cut found at its frame", f"{found} of {n}"],
+                ["cuts found where there is none (in these clips)", str(false_cuts)],
+                ["knee error, one shot (mean / median over clips)",
+                 f"{np.nanmean(knees):.2f} / {np.nanmedian(knees):.2f} deg"],
+                ["knee error, taken as one camera (mean / median)",
+                 f"{np.nanmean(knees_all):.2f} / {np.nanmedian(knees_all):.2f} deg"],
+                ["camera height error, one shot (median |%|)", f"{np.nanmedian(heights):.1f} %"],
+                ["verdict not ok: one shot / taken as one camera", f"{flagged} / {flagged_all} of {n}"],
+                ["wall time per clip, one shot (median)", f"{np.median(walls):.1f} s" if walls else "n/a"],
+            ]
+        rep.add("### Summary\n\n" + md_table(["measure", "value"], summary))
+        rep.numbers.update(found=found, n=n, false_cuts=false_cuts)
+
+        no_cut = []
+        shared = find_shared_data(getattr(args, "shared", None))
+        val = shared / "validation" if shared else None
+        if val is not None and val.is_dir():
+            no_cut += sorted(p for p in val.iterdir() if (p / "clip.json").exists())
+        held = Path(getattr(args, "heldout_dir", None) or Path(tmp) / "heldout")
+        no_cut += _heldout_clips(held)
+        rows = _no_cut_rows(no_cut)
+        wrong = [r for r in rows if r[1] != "none"]
+        rep.add("## Clips without a cut (the lane step alone)\n\n"
+                f"Clips: {len(rows)} ({'the 10 validation clips and ' if val is not None else ''}"
+                f"the 40 held-out clips). Cuts found in them: **{len(wrong)}** "
+                f"({', '.join(r[0] for r in wrong) or 'none'}). Largest colour change "
+                f"{max(r[2] for r in rows):.4f} (threshold 0.05), largest lane step "
+                f"{np.nanmax([r[3] for r in rows]):.4f} (threshold 0.10 or 30 x the clip's own noise).\n\n"
+                + md_table(["clip", "cuts found", "largest colour change", "largest lane step",
+                            "colour cuts vetoed by the lanes"], rows, floatfmt="{:.4f}"))
+        rep.numbers.update(no_cut_clips=len(rows), no_cut_false=len(wrong))
+    return rep
