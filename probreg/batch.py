@@ -59,7 +59,7 @@ MANIFEST_COLUMNS = {
 #: columns of ``summary.csv``
 SUMMARY_COLUMNS = ["clip", "name", "status", "error", "verdict", "verdict_reasons", "knee_l_median_deg",
                    "knee_r_median_deg", "knee_band_width_deg", "camera_height_m", "camera_height_lo_m",
-                   "camera_height_hi_m", "wall_s", "skipped", "gait_verdict"]
+                   "camera_height_hi_m", "wall_s", "skipped", "gait_verdict", "cuts", "frames_estimated"]
 
 def _defaults():
     """The options of a batch entry with their ``probreg run`` defaults (read from the classes
@@ -255,6 +255,9 @@ def _row_from_result(entry: BatchEntry, target):
     row = {"clip": str(entry.clip), "name": entry.name, "status": "ok" if verdict == "ok" else "flagged",
            "error": "", "verdict": verdict, "verdict_reasons": "; ".join(run.get("verdict_reasons", [])),
            "skipped": "no", "gait_verdict": run.get("gait_verdict", "n/a")}
+    shots = run.get("shots") or {}  # camera cuts found and the frames of the shot estimated
+    row.update(cuts=" ".join(map(str, shots.get("cuts", []))),
+               frames_estimated="-".join(map(str, shots.get("frames_estimated", []))))
     h = run.get("height_m") or {}
     row.update(camera_height_m=h.get("median"), camera_height_lo_m=h.get("lo"), camera_height_hi_m=h.get("hi"))
     try:

@@ -168,8 +168,7 @@ def _cmd_demo(args):
     out = Path(args.out)
     for sub in ("clip", "result"):
         _prepare_out(out / sub, overwrite=args.overwrite)
-    cfg = config_from_preset(args.preset, args.seed, n_frames=args.frames)
-    clip = synthesize(cfg, seed=args.seed, preset=args.preset)
+    clip = synthesize(config_from_preset(args.preset, args.seed, n_frames=args.frames), seed=args.seed, preset=args.preset)
     clip_dir = write_clip(clip, out / "clip", images=True, jobs=args.jobs, overwrite=args.overwrite)
     clip_report(clip_dir, out / "clip_report.html")
     res = run_clip(clip_dir, out / "result", _run_options(args))
@@ -187,9 +186,9 @@ def _nonneg_float(text):
 
 def _shot(text):
     """argparse type of ``--shot``: 'longest', 'all' or a shot's number."""
-    if text in ("longest", "all") or text.isdigit():
-        return text
-    raise argparse.ArgumentTypeError(f"must be longest, all or a shot's number (0, 1, ...), got {text!r}")
+    if not (text in ("longest", "all") or text.isdigit()):
+        raise argparse.ArgumentTypeError(f"must be longest, all or a shot's number (0, 1, ...), got {text!r}")
+    return text
 
 
 def _parse_dist(text):
@@ -202,6 +201,7 @@ def _cmd_calibrate(args):
     from .calibration.side import requested_side
     from .io.clip import atomic_output_dir, load_clip, write_json
     from .io.frames import has_frames
+    from .lanes.shots import shot_note
 
     clip = load_clip(args.clip, min_score=args.min_score)
     if not has_frames(clip):
@@ -210,7 +210,9 @@ def _cmd_calibrate(args):
     height = args.height_m if args.height_m is not None else DEFAULT_HEIGHT_M
     if not (height > 0):
         raise CliError(f"--height-m must be positive, got {height}")
-    reg = register_clip(clip, smooth=not args.no_smooth)
+    reg = register_clip(clip, smooth=not args.no_smooth, shot=args.shot)
+    if reg.shots.split:
+        print(f"warning: {shot_note(reg.shots)}", file=sys.stderr)
     given = requested_side(args.camera_side, clip.meta, clip.path / "clip.json")
     side = None
     if clip.keypoints_px is not None:
@@ -227,7 +229,7 @@ def _cmd_calibrate(args):
             "height_m": height, "height_source": "given" if args.height_m is not None else "default",
             "branch": args.branch, "forward_px": reg.forward_px, "status_counts": reg.status_counts(),
             "frame_status": info["frame_status"], "line_offsets": info["line_offsets"],
-            "consistency_m": info["consistency_m"], "dist": dist,
+            "consistency_m": info["consistency_m"], "dist": dist, "shots": reg.shots.to_dict(),
             "camera_side": side.to_dict() if side is not None else
             {"chosen": "main" if reg.forward_px[0] > 0 else "far", "source": "given" if given != "auto"
              else "default (no keypoints to decide by)"}})
@@ -515,8 +517,7 @@ def build_parser():
     c = sub.add_parser("calibrate", help="lanes -> vanishing point -> one-DOF camera family -> cameras")
     c.add_argument("clip", type=Path)
     c.add_argument("--out", type=Path, required=True)
-    c.add_argument("--height-m", type=float, default=None,
-                   help="camera height selecting the family member (default 12 m)")
+    c.add_argument("--height-m", type=float, default=None, help="camera height selecting the member (default 12 m)")
     c.add_argument("--dist", default=None, help="known/hypothesised lens distortion k1,k2,p1,p2,k3 (write --dist=-0.1,0,0,0,0 when k1 < 0)")
     c.add_argument("--branch", choices=("narrow", "wide"), default="narrow",
                    help="which family member when a height occurs twice (default: zoomed-in)")
@@ -524,6 +525,7 @@ def build_parser():
     c.add_argument("--min-score", type=float, default=0.3, help="keypoints below this score are missing")
     c.add_argument("--camera-side", choices=("auto", "main", "far"), default="auto",
                    help="side of the track the camera stands on (auto: decided by the athlete's motion)")
+    c.add_argument("--shot", type=_shot, default="longest", help="with camera cuts: the shot calibrated (as for run)")
     c.add_argument("--overwrite", action="store_true", help="move a non-empty foreign --out aside (never deleted)")
     c.set_defaults(func=_cmd_calibrate)
 

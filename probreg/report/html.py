@@ -284,6 +284,8 @@ def run_report(out_html, clip, result, joints_median, cameras, rendered=None):
     if side is not None:
         rep.paragraph(f"Camera side: {side.chosen} ({side.source}; log-evidence ratio {side.log_ratio:.1f} "
                       f"between the main stand and across the infield).", cls="note")
+    for note in (n for n in getattr(clip, "notes", ()) if str(n).startswith("camera cut")):
+        rep.paragraph(f"Camera shots: {note} (grey in the per-frame status strip; probreg.lanes.shots).", cls="note")
     d = result.diagnostics
     h = result.height
     post = result.posterior.posterior
@@ -458,16 +460,18 @@ def prior_posterior_figure(priors, posterior):
     return fig
 
 
-#: colours of the status strip: ok, bridged (camera interpolated), no camera
-_STATUS_COLOURS = {"ok": (0.2, 0.65, 0.2), "bridged": (0.95, 0.7, 0.1), "none": (0.8, 0.15, 0.15)}
+#: colours of the status strip: ok, bridged (camera interpolated), no camera, another camera shot
+_STATUS_COLOURS = {"ok": (0.2, 0.65, 0.2), "bridged": (0.95, 0.7, 0.1), "none": (0.8, 0.15, 0.15),
+                   "other_shot": (0.6, 0.6, 0.6)}
 
 
 def status_strip_figure(frame_status, fps):
-    """One coloured cell per frame: calibrated (green), bridged (orange), no camera (red)."""
+    """One coloured cell per frame: calibrated (green), bridged (orange), no camera (red), another
+    camera shot than the one estimated (grey; shown only when the clip has one)."""
     from matplotlib.patches import Patch
 
     def kind(s):
-        return "ok" if s == "ok" else ("bridged" if s.startswith("bridged") else "none")
+        return s if s in ("ok", "other_shot") else ("bridged" if s.startswith("bridged") else "none")
 
     kinds = [kind(s) for s in frame_status]
     rgb = np.array([[_STATUS_COLOURS[k] for k in kinds]])
@@ -476,9 +480,11 @@ def status_strip_figure(frame_status, fps):
     ax.set_yticks([])
     ax.set_xlabel("time (s)")
     counts = {k: kinds.count(k) for k in _STATUS_COLOURS}
-    labels = {"ok": "calibrated", "bridged": "bridged (no/inconsistent lanes)", "none": "no camera"}
-    ax.legend(handles=[Patch(color=_STATUS_COLOURS[k], label=f"{labels[k]} {counts[k]}") for k in _STATUS_COLOURS],
-              loc="upper center", bbox_to_anchor=(0.5, -0.9), ncol=3, fontsize=8, frameon=False)
+    labels = {"ok": "calibrated", "bridged": "bridged (no/inconsistent lanes)", "none": "no camera",
+              "other_shot": "another camera shot"}
+    shown = [k for k in _STATUS_COLOURS if k != "other_shot" or counts[k]]
+    ax.legend(handles=[Patch(color=_STATUS_COLOURS[k], label=f"{labels[k]} {counts[k]}") for k in shown],
+              loc="upper center", bbox_to_anchor=(0.5, -0.9), ncol=len(shown), fontsize=8, frameon=False)
     fig.subplots_adjust(bottom=0.5)
     return fig
 

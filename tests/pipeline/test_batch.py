@@ -33,10 +33,11 @@ def _summary(out):
 def test_manifest_paths_are_relative_to_it_and_options_override(tmp_path):
     (tmp_path / "season").mkdir()
     m = tmp_path / "season" / "m.csv"
-    m.write_text("clip,stature_m,camera_side,seed\nheat1,1.62,far,\n/abs/heat2.mp4,,,7\nheat1,,,\n")
+    m.write_text("clip,stature_m,camera_side,seed,shot\nheat1,1.62,far,,\n/abs/heat2.mp4,,,7,1\nheat1,,,,\n")
     e = read_manifest(m, {"seed": 0})
     assert e[0].clip == (tmp_path / "season" / "heat1").resolve() and e[0].options["stature"] == 1.62
     assert e[0].options["camera_side"] == "far" and e[0].options["seed"] == 0
+    assert e[1].options["shot"] == "1" and e[0].options["shot"] == "longest"  # the default
     assert e[1].clip == Path("/abs/heat2.mp4") and e[1].name == "heat2" and e[1].options["seed"] == 7
     assert [x.name for x in e] == ["heat1", "heat2", "heat1-2"]  # one result folder per entry
     assert {"stature_m", "camera_side", "model"} <= set(MANIFEST_COLUMNS)
@@ -47,6 +48,7 @@ def test_manifest_paths_are_relative_to_it_and_options_override(tmp_path):
     ("clip,colour\nx,red\n", "unknown column(s) colour"),
     ("clip,walkers\nx,many\n", "line 2, column 'walkers'"),
     ("clip,camera_side\nx,left\n", "not auto, main or far"),
+    ("clip,shot\nx,first\n", "column 'shot': 'first' is not longest, all or a number"),
     ("clip\n\n,\n", "empty 'clip'"),
 ])
 def test_bad_manifests_name_line_and_column(tmp_path, text, needle, capsys):
@@ -85,6 +87,7 @@ def test_batch_isolates_a_broken_clip_resumes_and_equals_single_runs(season, tmp
         assert r["status"] in ("ok", "flagged") and r["error"] == "" and float(r["knee_band_width_deg"]) > 0
         assert r["verdict"] in ("ok", "unreliable") and float(r["wall_s"]) > 0
         assert r["gait_verdict"] in ("ok", "unreliable")
+        assert r["cuts"] == "" and r["frames_estimated"] == "0-40"  # no cut: the whole clip
     # the same clip, the same options: batch equals a single `probreg run` byte for byte
     single = tmp_path / "single"
     main(["run", str(season / "heat1"), "--out", str(single), "--walkers", "20", "--max-steps", "600",

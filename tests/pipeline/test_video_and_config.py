@@ -46,6 +46,7 @@ def test_default_config_round_trips_to_the_defaults(tmp_path):
     ("[nonsense]\nx = 1\n", "unknown section [nonsense]"),
     ("[lens]\ndist = [0.1, 0]\n", "five numbers"),
     ("[camera]\nside = 'left'\n", "'auto', 'main' or 'far'"),
+    ("[camera]\nshot = 'first'\n", "'longest', 'all' or a shot's number"),
     ("[priors\n", "not valid TOML"),
     ("[priors]\ncamera_height_allowance = -0.1\n", "camera_height_allowance must be a finite number >= 0"),
 ])
@@ -72,12 +73,13 @@ def test_flags_override_the_config_which_overrides_the_defaults(tmp_path, monkey
     monkeypatch.setattr(pipeline, "run_source", fake_run_source)
     cfg = tmp_path / "c.toml"
     cfg.write_text("[priors]\nstature_m = 1.62\nstature_sd = 0.03\n[sampler]\ndraws = 7\nwalkers = 30\n"
-                   "[lens]\ndist = [-0.1, 0, 0, 0, 0]\n[camera]\nside = 'far'\n[detection]\nmodel = 'pose.onnx'\n")
+                   "[lens]\ndist = [-0.1, 0, 0, 0, 0]\n[camera]\nside = 'far'\nshot = '1'\n"
+                   "[detection]\nmodel = 'pose.onnx'\n")
     assert main(["run", "clip", "--out", str(tmp_path / "o"), "--config", str(cfg), "--walkers", "40"]) == 130
     o = seen["options"]
     assert o.priors.stature.mean == 1.62 and o.priors.stature.sd == 0.03
     assert o.sampler.n_draws == 7 and o.sampler.n_walkers == 40  # the flag wins
-    assert list(o.dist) == [-0.1, 0, 0, 0, 0] and o.camera_side == "far"
+    assert list(o.dist) == [-0.1, 0, 0, 0, 0] and o.camera_side == "far" and o.shot == "1"
     assert seen["kw"]["model"] == Path("pose.onnx")
 
 
