@@ -611,7 +611,8 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
     # the lanes' own families (before the vanishing-point smoother, which would blur a cut)
     raw = [_family_or_none(fl, (1.0, 0.0), clip.lane_width_m) for fl in fls]
     cuts, info = find_clip_cuts(change, raw, clip.image_size)
-    shots = split_shots(change, len(fls), shot, cuts=cuts, steps=info["steps"], vetoed=info["vetoed"])
+    shots = split_shots(change, len(fls), shot, cuts=cuts, steps=info["steps"], vetoed=info["vetoed"],
+                        lanes=[fl.ok for fl in fls])
     if shots.split:
         a, b = shots.frames
         fls = [fl if a <= i < b else replace(fl, status="other_shot", lines=(), vanishing_point=None, vp_cov=None)

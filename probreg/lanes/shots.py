@@ -161,13 +161,14 @@ class ShotSplit:
                 "step_max": num(self.step_max), "vetoed_colour_cuts": list(self.vetoed)}
 
 
-def split_shots(change, n_frames, shot="longest", cuts=None, steps=None, vetoed=()):
+def split_shots(change, n_frames, shot="longest", cuts=None, steps=None, vetoed=(), lanes=None):
     """The :class:`ShotSplit` of a clip from its frames' colour changes (``cuts``, when given, are
     the clip's cuts found otherwise, e.g. :func:`probreg.calibration.cuts.find_clip_cuts`, with
     ``steps`` the lane steps behind them).
 
-    ``shot``: ``"longest"`` (the longest shot; the first of equal ones), ``"all"`` (the clip as one
-    camera, whatever the cuts), or a shot's index (0-based, as listed in ``ranges``).
+    ``shot``: ``"longest"`` (the shot with the most frames that show lanes, ``lanes`` a bool per
+    frame; without ``lanes``, or among equal ones, the longest; the first of equal ones), ``"all"``
+    (the clip as one camera, whatever the cuts), or a shot's index (0-based, as in ``ranges``).
 
     >>> c = np.full(100, 0.003); c[0] = np.nan; c[30] = 0.3
     >>> s = split_shots(c, 100)
@@ -175,6 +176,8 @@ def split_shots(change, n_frames, shot="longest", cuts=None, steps=None, vetoed=
     ((30,), ((0, 30), (30, 100)), 1, (30, 100), True)
     >>> split_shots(c, 100, shot=0).frames, split_shots(c, 100, shot="all").split
     ((0, 30), False)
+    >>> split_shots(c, 100, lanes=np.arange(100) < 40).frames  # the long shot shows no lanes after frame 39
+    (0, 30)
     >>> split_shots(c, 100, shot=5)
     Traceback (most recent call last):
     ...
@@ -186,8 +189,9 @@ def split_shots(change, n_frames, shot="longest", cuts=None, steps=None, vetoed=
     if shot == "all":
         chosen, how = None, "all"
     elif shot == "longest":
-        lengths = [b - a for a, b in ranges]
-        chosen, how = int(np.argmax(lengths)) if lengths else 0, ("longest" if cuts else "only")
+        seen = np.ones(n_frames, bool) if lanes is None else np.asarray(lanes, bool)
+        keys = [(int(seen[a:b].sum()), b - a) for a, b in ranges]
+        chosen, how = (max(range(len(keys)), key=lambda k: (keys[k], -k)) if keys else 0), ("longest" if cuts else "only")
     else:
         try:
             chosen = int(shot)
