@@ -34,8 +34,8 @@ import numpy as np
 
 from ..lanes.shots import find_cuts
 
-__all__ = ["PROBE_FOV_DEG", "GEOMETRIC_CUT", "GEOMETRIC_NOISE_RATIO", "STEP_WINDOW", "STEP_REACH",
-           "family_signature", "signature_noise",
+__all__ = ["PROBE_FOV_DEG", "GEOMETRIC_CUT", "GEOMETRIC_NOISE_RATIO", "STEP_WINDOW", "PERSIST_WINDOW", "STEP_REACH",
+           "family_signature", "signature_noise", "persistent_steps",
            "family_steps", "geometric_cuts", "find_clip_cuts"]
 
 #: horizontal fields of view (deg) at which every frame's family is evaluated (from the longest
@@ -48,6 +48,10 @@ GEOMETRIC_CUT = 0.10
 GEOMETRIC_NOISE_RATIO = 30.0
 #: frames with lanes on either side whose median signature is compared
 STEP_WINDOW = 5
+#: ... and again over this many (as many as there are up to the clip's ends): a cut persists, while
+#: a line entering the view can move a few frames' families by as much as a cut (held-out 9038:
+#: three frames by 0.1, which five-frame windows took for a cut when the families settled back)
+PERSIST_WINDOW = 15
 #: how far (frames) a step looks for frames with lanes on either side
 STEP_REACH = 100
 
@@ -179,6 +183,18 @@ def geometric_cuts(signature, steps=None, threshold=None, window=STEP_WINDOW):
     return cuts
 
 
+def persistent_steps(signature):
+    """The smaller of the steps over :data:`STEP_WINDOW` and over :data:`PERSIST_WINDOW` frames with
+    lanes (:func:`family_steps`): large only where the signature changes and stays changed.
+
+    >>> sig = np.zeros((60, 3)); sig[30:] = 0.3; sig[10:13] = 0.3  # a cut at 30, an excursion at 10-12
+    >>> s = persistent_steps(sig)
+    >>> round(float(s[30]), 2), round(float(np.nanmax(s[5:20])), 2), round(float(np.nanmax(family_steps(sig)[5:20])), 2)
+    (0.3, 0.0, 0.3)
+    """
+    return np.fmin(family_steps(signature, STEP_WINDOW), family_steps(signature, PERSIST_WINDOW))
+
+
 def find_clip_cuts(colour_change, families, image_size):
     """The clip's camera cuts from both signals (see the module docstring): every geometric cut
     (moved to a colour cut within :data:`STEP_WINDOW` frames, which places it exactly), and every
@@ -189,7 +205,7 @@ def find_clip_cuts(colour_change, families, image_size):
     ``info``: the steps of every frame (``steps``; NaN within :data:`STEP_WINDOW` frames of a cut,
     where the windows straddle it) and colour cuts vetoed by the lanes (``vetoed``)."""
     sig = family_signature(families, image_size)
-    steps = family_steps(sig)
+    steps = persistent_steps(sig)
     colour = find_cuts(colour_change)
     geo = geometric_cuts(sig, steps)
     finite = steps[np.isfinite(steps)]
