@@ -6,11 +6,13 @@ another camera the family jumps: the camera that a given focal length implies is
 another height.  Each frame's family is evaluated in closed form at a few fixed fields of view
 (:data:`PROBE_FOV_DEG`, from a long lens to a wide one) and the log height of each member is
 the frame's signature; the *step* at frame ``i`` is the median over those fields of view of the
-change of the signature's median over the :data:`STEP_WINDOW` frames before ``i`` to its median
-over the frames from ``i`` on.  A cut is a step above :data:`GEOMETRIC_CUT` (0.10: the family's
-camera 10 % higher or lower at every field of view), placed at the frame of the largest change
-between consecutive frames within the step's plateau.  Window medians make a single misread
-frame no cut.
+change of the signature's median over the :data:`STEP_WINDOW` nearest frames with lanes before
+``i`` to its median over those from ``i`` on, and it must persist: the smaller of that step and
+the one over :data:`PERSIST_WINDOW` frames counts.  A cut is a step above :data:`GEOMETRIC_CUT`
+(0.10: the family's camera 10 % higher or lower at every field of view) and above
+:data:`GEOMETRIC_NOISE_RATIO` times the clip's own frame-to-frame noise, placed at the frame of
+the largest change between consecutive frames within the step's plateau.  Window medians make a
+single misread frame no cut, the longer window a few frames' excursion.
 
 Measured (lanes at their raw per-frame values, before the vanishing-point smoother, which would
 blur a cut): within continuous shots the step stays at or below 0.035 on the ten independent
@@ -84,10 +86,10 @@ def family_steps(signature, window=STEP_WINDOW, reach=STEP_REACH):
     before it against the ``window`` nearest from it on (within ``reach`` frames; NaN where a side
     has none), so that frames without lanes between two shots do not hide a change.
 
-    A camera that zooms or pans moves its signature a little from frame to frame.  Where frames
-    without lanes separate the two windows, the step is net of that drift over the extra frames:
-    twice the windows' own drift per frame (the median change between their consecutive frames
-    with lanes) times the frames by which the windows lie further apart than ``window``.
+    A camera that zooms or pans moves its signature steadily from frame to frame, and two windows'
+    medians lie frames apart: each field of view's difference is corrected by the windows' own
+    drift (the median signed change per frame between their consecutive frames with lanes) times
+    the distance between the windows' centres, before the median over the fields of view.
 
     >>> sig = np.log(np.r_[np.full(20, 9.0), np.full(20, 12.0)])[:, None] * np.ones((1, 3))
     >>> s = family_steps(sig)
@@ -99,6 +101,9 @@ def family_steps(signature, window=STEP_WINDOW, reach=STEP_REACH):
     >>> zoom = np.linspace(0.0, 0.2, 40)[:, None] * np.ones((1, 3)); zoom[10:30] = np.nan
     >>> round(float(family_steps(zoom)[20]), 3)  # a steady zoom across a gap is no step
     0.0
+    >>> cut = zoom.copy(); cut[30:] += 0.12; cut[10:30] = np.linspace(0, 0.2, 40)[10:30, None]
+    >>> round(float(family_steps(cut, window=15)[30]), 3)  # nor does it eat into a cut's step
+    0.12
     """
     sig = np.asarray(signature, float)
     F = len(sig)
@@ -116,14 +121,13 @@ def family_steps(signature, window=STEP_WINDOW, reach=STEP_REACH):
             both = np.isfinite(b).any(0) & np.isfinite(a).any(0)
             if not both.any():
                 continue
-            step = float(np.median(np.abs(np.nanmedian(a[:, both], 0) - np.nanmedian(b[:, both], 0))))
-            extra = (after.mean() - before.mean()) - window  # frames beyond contiguous windows
-            if extra > 0:
-                rates = [np.nanmedian(np.abs(np.diff(x, axis=0)) / np.diff(r)[:, None])
-                         for x, r in ((b, before), (a, after)) if len(r) > 1]
-                rates = [v for v in rates if np.isfinite(v)]
-                step = max(0.0, step - 2.0 * float(np.median(rates)) * extra) if rates else step
-            out[i] = step
+            d = np.nanmedian(a[:, both], 0) - np.nanmedian(b[:, both], 0)
+            rates = [np.diff(x[:, both], axis=0) / np.diff(r)[:, None] for x, r in ((b, before), (a, after))
+                     if len(r) > 1]
+            if rates:
+                rate = np.nanmedian(np.concatenate(rates), axis=0)
+                d = d - np.where(np.isfinite(rate), rate, 0.0) * (np.median(after) - np.median(before))
+            out[i] = float(np.median(np.abs(d)))
     return out
 
 
