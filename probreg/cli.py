@@ -270,8 +270,7 @@ def _cmd_lift(args):
             segments = segments.get("segments_m", segments)
         except (OSError, ValueError) as exc:
             raise CliError(f"{args.segments}: cannot read segment lengths ({exc})") from None
-    cfg = LiftConfig(min_score=args.min_score,
-                     smooth_cutoff_hz=None if args.no_smooth else "auto")
+    cfg = LiftConfig(min_score=args.min_score, smooth_cutoff_hz=None if args.no_smooth else "auto")
     res = lift(cams, clip.keypoints_px, clip.fps, segments_m=segments, config=cfg)
     ang = res.angles_deg()
     with atomic_output_dir(args.out, overwrite=args.overwrite, inputs=[args.clip, args.cameras], log=print) as tmp:
@@ -358,7 +357,8 @@ def _cmd_batch(args):
     base = {"stature": args.stature, "stature_sd": args.stature_sd, "height_m": args.height_m,
             "height_log_sd": args.height_log_sd, "camera_side": args.camera_side,
             "model": str(args.model.resolve()) if args.model else None, "seed": args.seed, "walkers": args.walkers,
-            "max_steps": args.max_steps, "draws": args.draws, "dist": args.dist, "min_score": args.min_score}
+            "max_steps": args.max_steps, "draws": args.draws, "dist": args.dist, "min_score": args.min_score,
+            "shot": args.shot, "height_allowance": args.height_allowance}
     if args.workers is not None and args.workers < 1:
         raise CliError("--workers must be at least 1")
     try:

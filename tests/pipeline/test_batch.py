@@ -61,6 +61,24 @@ def test_bad_manifests_name_line_and_column(tmp_path, text, needle, capsys):
     assert needle in capsys.readouterr().err
 
 
+def test_batch_flags_reach_every_entry(tmp_path, monkeypatch):
+    """Options given on the command line are the entries' defaults, none silently dropped."""
+    import probreg.batch as batch
+
+    seen = {}
+
+    def fake_run_batch(manifest, out, base, **kw):
+        seen.update(base)
+        raise KeyboardInterrupt  # stop before any work
+
+    monkeypatch.setattr(batch, "run_batch", fake_run_batch)
+    m = tmp_path / "m.csv"
+    m.write_text("clip\nx\n")
+    assert main(["batch", str(m), "--out", str(tmp_path / "o"), "--shot", "1", "--height-allowance", "0.01",
+                 "--camera-side", "far"]) == 130
+    assert seen["shot"] == "1" and seen["height_allowance"] == 0.01 and seen["camera_side"] == "far"
+
+
 # ----------------------------------------------------------------------------- on a LocalCluster
 pytest.importorskip("distributed")
 
