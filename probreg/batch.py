@@ -112,6 +112,8 @@ def read_manifest(path, base_options=None):
     if unknown:
         raise ClipFormatError(f"{path}: unknown column(s) {', '.join(unknown)} (known: clip, "
                               f"{', '.join(MANIFEST_COLUMNS)})")
+    from .lanes.shots import is_shot_option
+
     base = {**DEFAULTS, **(base_options or {})}
     entries, used = [], {}
     for k, row in enumerate(rows, start=2):  # line numbers as a spreadsheet shows them
@@ -138,7 +140,7 @@ def read_manifest(path, base_options=None):
                 name = value
             elif dest == "camera_side" and value not in ("auto", "main", "far"):
                 raise ClipFormatError(f"{path}: line {k}, column 'camera_side': {value!r} is not auto, main or far")
-            elif dest == "shot" and not (value in ("longest", "all") or value.isdigit()):
+            elif dest == "shot" and not is_shot_option(value):
                 raise ClipFormatError(f"{path}: line {k}, column 'shot': {value!r} is not longest, all or a number")
             else:
                 opts[dest] = value
@@ -199,7 +201,7 @@ def _run_options(o):
         raise ValueError(f"height_allowance must be a finite number >= 0, got {o['height_allowance']!r}")
     return RunOptions(priors=priors, sampler=sampler, dist=dist, min_score=float(o["min_score"]),
                       camera_side=o["camera_side"], overwrite=False, height_allowance=allowance,
-                      shot=str(o.get("shot", "longest")))
+                      shot=str(o["shot"]))
 
 
 def run_entry(entry: BatchEntry, out_dir, digest):

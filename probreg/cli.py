@@ -186,7 +186,9 @@ def _nonneg_float(text):
 
 def _shot(text):
     """argparse type of ``--shot``: 'longest', 'all' or a shot's number."""
-    if not (text in ("longest", "all") or text.isdigit()):
+    from .lanes.shots import is_shot_option
+
+    if not is_shot_option(text):
         raise argparse.ArgumentTypeError(f"must be longest, all or a shot's number (0, 1, ...), got {text!r}")
     return text
 
@@ -201,7 +203,6 @@ def _cmd_calibrate(args):
     from .calibration.side import requested_side
     from .io.clip import atomic_output_dir, load_clip, write_json
     from .io.frames import has_frames
-    from .lanes.shots import shot_note
 
     clip = load_clip(args.clip, min_score=args.min_score)
     if not has_frames(clip):
@@ -212,7 +213,7 @@ def _cmd_calibrate(args):
         raise CliError(f"--height-m must be positive, got {height}")
     reg = register_clip(clip, smooth=not args.no_smooth, shot=args.shot)
     if reg.shots.split:
-        print(f"warning: {shot_note(reg.shots)}", file=sys.stderr)
+        print(f"warning: {reg.shots.note()}", file=sys.stderr)
     given = requested_side(args.camera_side, clip.meta, clip.path / "clip.json")
     side = None
     if clip.keypoints_px is not None:
@@ -352,13 +353,11 @@ def _cmd_opensim(args):
 
 
 def _cmd_batch(args):
-    from .batch import run_batch
+    from .batch import DEFAULTS, run_batch
 
-    base = {"stature": args.stature, "stature_sd": args.stature_sd, "height_m": args.height_m,
-            "height_log_sd": args.height_log_sd, "camera_side": args.camera_side,
-            "model": str(args.model.resolve()) if args.model else None, "seed": args.seed, "walkers": args.walkers,
-            "max_steps": args.max_steps, "draws": args.draws, "dist": args.dist, "min_score": args.min_score,
-            "shot": args.shot, "height_allowance": args.height_allowance}
+    # every option of an entry that the command line takes is the entries' default (none dropped)
+    base = {k: getattr(args, k) for k in DEFAULTS if hasattr(args, k)}
+    base["model"] = str(args.model.resolve()) if args.model else None
     if args.workers is not None and args.workers < 1:
         raise CliError("--workers must be at least 1")
     try:

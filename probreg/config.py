@@ -160,7 +160,9 @@ def _convert(path, key, value):
             raise ConfigError(f"{where} must be a string, got {value!r}")
         if key.dest == "camera_side" and value not in ("auto", "main", "far"):
             raise ConfigError(f"{where} must be 'auto', 'main' or 'far', got {value!r}")
-        if key.dest == "shot" and not (value in ("longest", "all") or value.isdigit()):
+        from .lanes.shots import is_shot_option
+
+        if key.dest == "shot" and not is_shot_option(value):
             raise ConfigError(f"{where} must be 'longest', 'all' or a shot's number, got {value!r}")
         if key.dest == "lens" and value not in ("infer", "none"):
             raise ConfigError(f"{where} must be 'infer' or 'none', got {value!r}")

@@ -45,12 +45,13 @@ from .inference.sampling import SamplerSettings
 from .inference.evidence import BRANCHES, BranchChoice, laplace_log_evidence
 from .inference.verdict import bone_length_cv, clip_verdict, knee_band_width, knee_flexion_peak, view_obliquity
 from .inference.parallel import default_workers, fork_call, warm_imports
-from .io.clip import FPS_RANGE, ClipFormatError, load_clip, write_json
+from .io.clip import (FPS_RANGE, MIN_ATHLETE_FRAMES, MIN_ATHLETE_JOINTS, ClipFormatError, athlete_frames, load_clip,
+                      write_json)
 from .io.frames import has_frames
 from .io.output import atomic_output_dir, prepare_output
-from .lanes.shots import restrict_clip
 from .io.opensim import write_mot, write_trc
 from .io.results import write_angles_csv, write_gait_cycle_csv, write_joints_npz
+from .lanes.shots import is_shot_option, restrict_clip
 
 __all__ = ["RunOptions", "RunResult", "run_clip", "run_source", "detect_athlete", "probe_video", "is_video",
            "VIDEO_SUFFIXES", "posterior_inference_data"]
@@ -355,7 +356,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         raise ValueError(f"lens must be 'infer' or 'none', got {options.lens!r}")
     if options.branch not in (*BRANCHES, "auto"):
         raise ValueError(f"branch must be auto, narrow or wide, got {options.branch!r}")
-    if str(options.shot) not in ("longest", "all") and not str(options.shot).isdigit():
+    if not is_shot_option(options.shot):
         raise ValueError(f"shot must be 'longest', 'all' or a shot's number, got {options.shot!r}")
     inputs = [clip_dir, *protect]
     prepare_output(out_dir, inputs=inputs, overwrite=options.overwrite)  # before any work
@@ -366,10 +367,9 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         raise ClipFormatError(f"{clip_dir}: no keypoints2d.json (run 'probreg detect' first)")
     if not has_frames(clip):
         raise ClipFormatError(f"{clip_dir}: no frames/ folder or video.mp4")
-    seen = int(np.sum(np.isfinite(clip.keypoints_px[..., 0]).sum(axis=1) >= 8))
-    if seen < 10:
-        raise ValueError(f"{clip_dir}: only {seen} frames have a detected athlete (at least 8 joints); "
-                         f"the model needs at least 10")
+    if (seen := athlete_frames(clip.keypoints_px)) < MIN_ATHLETE_FRAMES:
+        raise ValueError(f"{clip_dir}: only {seen} frames have a detected athlete (at least {MIN_ATHLETE_JOINTS} "
+                         f"joints); the model needs at least {MIN_ATHLETE_FRAMES}")
     given = requested_side(options.camera_side, clip.meta, clip.path / "clip.json")
     warm = []
     reg = register_clip(clip, progress=options.progress, started=lambda: warm.append(warm_imports()),

@@ -26,9 +26,9 @@ views of the same rendered stadium that the colours do not tell apart.  ``probre
 
 The colour change (:mod:`probreg.lanes.shots`) finds the cut's frame exactly and works where
 one side of a cut has no lanes; the two are combined in :func:`find_clip_cuts`: where the lanes
-can compare both sides of a frame they decide (a colour cut they see across without a step
-above :data:`GEOMETRIC_CUT` is the same camera: a flash, a graphic, lanes lost for a while), and
-the colours decide where they cannot.
+can compare both sides of a frame they decide (a colour cut they see across with no more than
+their typical step is the same camera: a flash, a graphic, lanes lost for a while), and the
+colours decide where they cannot.
 """
 
 from __future__ import annotations
@@ -152,6 +152,18 @@ def family_steps(signature, window=STEP_WINDOW, reach=STEP_REACH):
     return out
 
 
+def _lane_changes(sig):
+    """``(F,)`` change of each frame with lanes from the frame with lanes before it (median over the
+    fields of view; NaN elsewhere)."""
+    out = np.full(len(sig), np.nan)
+    rows = np.flatnonzero(np.isfinite(sig).any(axis=1))
+    if len(rows) > 1:
+        with warnings.catch_warnings():
+            warnings.simplefilter("ignore", RuntimeWarning)
+            out[rows[1:]] = np.nanmedian(np.abs(sig[rows[1:]] - sig[rows[:-1]]), axis=1)
+    return out
+
+
 def signature_noise(signature):
     """The median change of the signature from one frame with lanes to the next (median over the
     fields of view): how much a frame's family moves by itself (0 with fewer than two frames).
@@ -159,13 +171,7 @@ def signature_noise(signature):
     >>> round(signature_noise(np.array([[0.0], [0.01], [0.03], [np.nan], [0.04]])), 3)
     0.01
     """
-    sig = np.asarray(signature, float)
-    rows = np.flatnonzero(np.isfinite(sig).any(axis=1))
-    if len(rows) < 2:
-        return 0.0
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        d = np.nanmedian(np.abs(sig[rows[1:]] - sig[rows[:-1]]), axis=1)
+    d = _lane_changes(np.asarray(signature, float))
     return float(np.nanmedian(d)) if np.isfinite(d).any() else 0.0
 
 
@@ -173,8 +179,9 @@ def geometric_cuts(signature, steps=None, threshold=None, window=STEP_WINDOW):
     """Frames that start a new camera by the lanes: each run of steps above ``threshold`` (runs
     closer than ``window`` frames merged) gives one cut, at the frame of the largest change of
     the signature from the frame before (or of the largest step where no two consecutive frames
-    have lanes).  ``threshold``: by default :data:`GEOMETRIC_CUT` or
-    :data:`GEOMETRIC_NOISE_RATIO` times :func:`signature_noise`, whichever is larger.
+    have lanes).  ``steps``: by default :func:`persistent_steps`; ``threshold``: by default
+    :data:`GEOMETRIC_CUT` or :data:`GEOMETRIC_NOISE_RATIO` times :func:`signature_noise`, whichever
+    is larger.
 
     >>> sig = np.log(np.r_[np.full(30, 9.0), np.full(30, 13.0)])[:, None] * np.ones((1, 3))
     >>> sig[10] += 0.5  # one misread frame: no cut
@@ -182,7 +189,7 @@ def geometric_cuts(signature, steps=None, threshold=None, window=STEP_WINDOW):
     [30]
     """
     sig = np.asarray(signature, float)
-    steps = family_steps(sig, window) if steps is None else np.asarray(steps, float)
+    steps = persistent_steps(sig) if steps is None else np.asarray(steps, float)
     if threshold is None:
         threshold = max(GEOMETRIC_CUT, GEOMETRIC_NOISE_RATIO * signature_noise(sig))
     above = np.flatnonzero(np.isfinite(steps) & (steps > threshold))
@@ -194,11 +201,7 @@ def geometric_cuts(signature, steps=None, threshold=None, window=STEP_WINDOW):
             runs.append((start, a))
             start = b
     runs.append((start, above[-1]))
-    diff = np.full(len(sig), np.nan)  # each frame with lanes against the one with lanes before it
-    rows = np.flatnonzero(np.isfinite(sig).any(axis=1))
-    with np.errstate(invalid="ignore"), warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        diff[rows[1:]] = np.nanmedian(np.abs(sig[rows[1:]] - sig[rows[:-1]]), axis=1)
+    diff = _lane_changes(sig)
     cuts = []
     for a, b in runs:
         lo, hi = max(1, a - 1), min(len(sig) - 1, b + 1)
@@ -258,4 +261,4 @@ def find_clip_cuts(colour_change, families, image_size):
     away = steps.copy()  # a step's windows straddle a cut for STEP_WINDOW frames around it
     for c in cuts:
         away[max(0, c - STEP_WINDOW):c + STEP_WINDOW] = np.nan
-    return sorted(cuts), {"steps": away, "vetoed": vetoed, "noise": signature_noise(sig)}
+    return sorted(cuts), {"steps": away, "vetoed": vetoed}

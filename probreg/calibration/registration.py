@@ -564,8 +564,9 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
     ``started()``, when given, is called once the background work is started (threads must
     start only then: a fork while another thread holds an import lock could hang).
 
-    Camera cuts are found from the frames' colour changes (:mod:`probreg.lanes.shots`); the
-    registration's ``shots`` says where they are.  ``shot`` (``"longest"``, ``"all"`` or a shot's
+    Camera cuts are found from the lanes' own families and the frames' colour changes
+    (:func:`probreg.calibration.cuts.find_clip_cuts`); the registration's ``shots`` says where
+    they are.  ``shot`` (``"longest"``, ``"all"`` or a shot's
     index) picks the frames whose lanes are used: the frames of the other shots get the lane
     status ``other_shot`` (no lines), so that one static camera is estimated from one shot.
     Raises ``ValueError`` for a ``shot`` the clip does not have.

@@ -29,7 +29,26 @@ __all__ = [
     "read_cameras_json",
     "write_json",
     "atomic_output_dir",
+    "athlete_frames",
+    "MIN_ATHLETE_FRAMES",
+    "MIN_ATHLETE_JOINTS",
 ]
+
+#: a frame has a detected athlete with at least this many joints, and a clip (or the shot of it
+#: that is estimated) needs at least this many such frames
+MIN_ATHLETE_JOINTS = 8
+MIN_ATHLETE_FRAMES = 10
+
+
+def athlete_frames(keypoints_px):
+    """Frames of ``keypoints_px`` (F, J, 2 or 3) in which at least :data:`MIN_ATHLETE_JOINTS`
+    joints were detected.
+
+    >>> kp = np.full((3, 17, 3), np.nan); kp[0] = 1.0; kp[1, :8] = 1.0; kp[2, :7] = 1.0
+    >>> athlete_frames(kp)
+    2
+    """
+    return int(np.sum(np.isfinite(np.asarray(keypoints_px, float)[..., 0]).sum(axis=1) >= MIN_ATHLETE_JOINTS))
 
 
 class ClipFormatError(ValueError):

@@ -1,8 +1,8 @@
 """Lane lines and their vanishing point (seed paper, Sec. 3.1): the few parallel lane lines of
 the straight that a zoomed-in broadcast camera sees are found, measured to sub-pixel accuracy,
 followed from frame to frame, and fitted as a pencil through one vanishing point with integer
-line indices.  Camera cuts between the frames are found from their colour changes
-(:mod:`probreg.lanes.shots`).  Failures are per-frame statuses (:data:`STATUSES`), never exceptions.
+line indices.  The frames' colour changes and the shots between camera cuts are in
+:mod:`probreg.lanes.shots` (the cuts themselves: :mod:`probreg.calibration.cuts`).  Failures are per-frame statuses (:data:`STATUSES`), never exceptions.
 """
 
 from .detection import detect_lanes

@@ -32,7 +32,7 @@ from dataclasses import dataclass
 import numpy as np
 
 __all__ = ["colour_histogram", "histogram_change", "find_cuts", "shot_ranges", "ShotSplit", "split_shots",
-           "restrict_clip", "shot_note",
+           "restrict_clip", "is_shot_option",
            "CUT_MIN_CHANGE", "CUT_LOCAL_RATIO"]
 
 #: the smallest colour change (total variation distance of consecutive frames' histograms) that
@@ -42,9 +42,6 @@ CUT_MIN_CHANGE = 0.05
 CUT_LOCAL_RATIO = 6.0
 #: frames on either side whose median change is the local level
 CUT_WINDOW = 12
-#: shots shorter than this (frames) are not estimated on their own when another is chosen
-MIN_SHOT_FRAMES = 10
-
 #: pixels sampled across the image for the histogram (a coarse grid is enough for a colour
 #: distribution: every 4th pixel of a 1080p frame, ~0.55 ms)
 _SAMPLE_WIDTH = 480
@@ -163,6 +160,28 @@ class ShotSplit:
                 "how": self.how, "frames_estimated": list(self.frames), "change_max": num(self.change_max),
                 "step_max": num(self.step_max), "vetoed_colour_cuts": list(self.vetoed)}
 
+    def note(self):
+        """The input note of a clip whose shots were split.
+
+        >>> ShotSplit(cuts=(120,), ranges=((0, 120), (120, 240)), chosen=1, how="longest").note()
+        'camera cut at frame 120: 2 shots; estimated shot 1 (frames 120-239, the longest); the other frames have status other_shot (--shot N picks another, --shot all takes the clip as one camera)'
+        """
+        a, b = self.frames
+        many = "s" if len(self.cuts) > 1 else ""
+        return (f"camera cut{many} at frame{many} {', '.join(map(str, self.cuts))}: "
+                f"{len(self.ranges)} shots; estimated shot {self.chosen} (frames {a}-{b - 1}"
+                f"{', the longest' if self.how == 'longest' else ''}); the other frames have status other_shot "
+                "(--shot N picks another, --shot all takes the clip as one camera)")
+
+
+def is_shot_option(value):
+    """Whether ``value`` is a ``--shot``: ``"longest"``, ``"all"`` or a shot's number (0-based).
+
+    >>> [is_shot_option(v) for v in ("longest", "all", "2", 2, "first", "-1")]
+    [True, True, True, True, False, False]
+    """
+    return str(value) in ("longest", "all") or str(value).isdigit()
+
 
 def split_shots(change, n_frames, shot="longest", cuts=None, steps=None, vetoed=(), lanes=None):
     """The :class:`ShotSplit` of a clip from its frames' colour changes (``cuts``, when given, are
@@ -196,11 +215,10 @@ def split_shots(change, n_frames, shot="longest", cuts=None, steps=None, vetoed=
         keys = [(int(seen[a:b].sum()), b - a) for a, b in ranges]
         chosen, how = (max(range(len(keys)), key=lambda k: (keys[k], -k)) if keys else 0), ("longest" if cuts else "only")
     else:
-        try:
-            chosen = int(shot)
-        except (TypeError, ValueError):
-            raise ValueError(f"--shot must be 'longest', 'all' or a shot's number, got {shot!r}") from None
-        if not 0 <= chosen < len(ranges):
+        if not is_shot_option(shot):
+            raise ValueError(f"--shot must be 'longest', 'all' or a shot's number, got {shot!r}")
+        chosen = int(shot)
+        if chosen >= len(ranges):
             raise ValueError(f"--shot {shot}: the clip has {len(ranges)} shot(s)"
                              + (f" (cuts at frames {', '.join(map(str, cuts))})" if cuts else "")
                              + ", numbered from 0")
@@ -216,39 +234,27 @@ def split_shots(change, n_frames, shot="longest", cuts=None, steps=None, vetoed=
                      step_max=largest(steps), vetoed=tuple(int(v) for v in vetoed))
 
 
-def restrict_clip(clip, split: ShotSplit, min_frames=MIN_SHOT_FRAMES):
+def restrict_clip(clip, split: ShotSplit):
     """The clip with the 2D keypoints of the frames outside the estimated shot removed (NaN) and a
     note saying so; the clip itself when nothing is left out.
 
-    Raises ``ValueError`` when the estimated shot has fewer than ``min_frames`` frames with a
-    detected athlete (at least 8 joints).
+    Raises ``ValueError`` when the estimated shot has fewer frames with a detected athlete than a
+    clip needs (:func:`probreg.io.clip.athlete_frames`).
     """
     from dataclasses import replace
+
+    from ..io.clip import MIN_ATHLETE_FRAMES, MIN_ATHLETE_JOINTS, athlete_frames
 
     if split is None or not split.split:
         return clip
     a, b = split.frames
     kp = None if clip.keypoints_px is None else np.array(clip.keypoints_px, float, copy=True)
     if kp is not None:
-        seen = int(np.sum(np.isfinite(kp[a:b, :, 0]).sum(axis=1) >= 8))
-        if seen < min_frames:
+        if (seen := athlete_frames(kp[a:b])) < MIN_ATHLETE_FRAMES:
             raise ValueError(f"{clip.path}: the shot estimated (frames {a}-{b - 1}) has only {seen} frames with a "
-                             f"detected athlete (at least {min_frames} needed); camera cuts at frames "
+                             f"detected athlete (at least {MIN_ATHLETE_JOINTS} joints; {MIN_ATHLETE_FRAMES} "
+                             f"needed); camera cuts at frames "
                              f"{', '.join(map(str, split.cuts))}: choose another shot with --shot")
         kp[:a] = np.nan
         kp[b:] = np.nan
-    return replace(clip, keypoints_px=kp, notes=(*clip.notes, shot_note(split)))
-
-
-def shot_note(split: ShotSplit):
-    """The input note of a clip whose shots were split.
-
-    >>> shot_note(ShotSplit(cuts=(120,), ranges=((0, 120), (120, 240)), chosen=1, how="longest"))
-    'camera cut at frame 120: 2 shots; estimated shot 1 (frames 120-239, the longest); the other frames have status other_shot (--shot N picks another, --shot all takes the clip as one camera)'
-    """
-    a, b = split.frames
-    cuts = ", ".join(map(str, split.cuts))
-    return (f"camera cut{'s' if len(split.cuts) > 1 else ''} at frame{'s' if len(split.cuts) > 1 else ''} {cuts}: "
-            f"{len(split.ranges)} shots; estimated shot {split.chosen} (frames {a}-{b - 1}"
-            f"{', the longest' if split.how == 'longest' else ''}); the other frames have status other_shot "
-            "(--shot N picks another, --shot all takes the clip as one camera)")
+    return replace(clip, keypoints_px=kp, notes=(*clip.notes, split.note()))

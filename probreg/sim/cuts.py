@@ -22,6 +22,7 @@ from pathlib import Path
 
 import numpy as np
 
+from ..io.clip import atomic_output_dir
 from .heldout import heldout_config
 from .synth import synthesize, write_clip
 
@@ -57,13 +58,14 @@ def cut_config(seed, n_frames=100):
 
 def write_cut_clip(out_dir, seed, n_frames=100, jobs=None):
     """Write the cut clip of ``seed`` to ``out_dir`` (a clip folder of CLIP_FORMAT with its
-    ground truth; ``clip.json`` gains ``"generator": {"cut": frame, ...}``); returns the path."""
+    ground truth; ``clip.json`` gains ``"generator": {"cut": frame, ...}``), atomically
+    (:func:`probreg.io.clip.atomic_output_dir`: a folder that holds files probreg did not write
+    is refused); returns the path.  Both cameras' clips are rendered whole and spliced."""
     first, second, cut, what = cut_config(seed, n_frames)
-    out = Path(out_dir)
-    with tempfile.TemporaryDirectory(prefix="probreg-cut-") as tmp:
+    with tempfile.TemporaryDirectory(prefix="probreg-cut-") as tmp, atomic_output_dir(Path(out_dir)) as out:
         parts = [write_clip(synthesize(cfg, seed=int(seed), preset="cut"), Path(tmp) / name, images=True, jobs=jobs)
                  for name, cfg in (("a", first), ("b", second))]
-        (out / "frames").mkdir(parents=True)
+        (out / "frames").mkdir()
         (out / "groundtruth").mkdir()
         for i in range(n_frames):
             src = parts[0] if i < cut else parts[1]
@@ -81,4 +83,4 @@ def write_cut_clip(out_dir, seed, n_frames=100, jobs=None):
         meta = json.loads((parts[0] / "clip.json").read_text())
         meta["generator"] = {"name": "probreg.sim.cuts", "seed": int(seed), "cut": cut, "shots": what}
         (out / "clip.json").write_text(json.dumps(meta, indent=1))
-    return out
+    return Path(out_dir)
