@@ -53,7 +53,7 @@ MANIFEST_COLUMNS = {
     "det_model": ("det_model", "path"), "athlete": ("athlete", str), "fps": ("fps", float),
     "seed": ("seed", int), "walkers": ("walkers", int), "max_steps": ("max_steps", int), "draws": ("draws", int),
     "dist": ("dist", str), "min_score": ("min_score", float), "name": ("name", str),
-    "height_allowance": ("height_allowance", float), "shot": ("shot", str),
+    "height_allowance": ("height_allowance", float), "shot": ("shot", str), "slow_motion": ("slow_motion", float),
 }
 
 #: columns of ``summary.csv``
@@ -71,7 +71,8 @@ def _defaults():
     return {"stature": None, "stature_sd": None, "height_m": None, "height_log_sd": None,
             "camera_side": run.camera_side, "model": None, "det_model": None, "athlete": None, "fps": None,
             "seed": smp.seed, "walkers": smp.n_walkers, "max_steps": smp.max_steps, "draws": smp.n_draws,
-            "dist": None, "min_score": run.min_score, "height_allowance": run.height_allowance, "shot": run.shot}
+            "dist": None, "min_score": run.min_score, "height_allowance": run.height_allowance, "shot": run.shot,
+            "slow_motion": run.slow_motion}
 
 
 #: options of a batch entry with their ``probreg run`` defaults
@@ -201,7 +202,7 @@ def _run_options(o):
         raise ValueError(f"height_allowance must be a finite number >= 0, got {o['height_allowance']!r}")
     return RunOptions(priors=priors, sampler=sampler, dist=dist, min_score=float(o["min_score"]),
                       camera_side=o["camera_side"], overwrite=False, height_allowance=allowance,
-                      shot=str(o["shot"]))
+                      shot=str(o["shot"]), slow_motion=float(o["slow_motion"]))
 
 
 def run_entry(entry: BatchEntry, out_dir, digest):

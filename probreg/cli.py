@@ -98,6 +98,7 @@ def _log(args):
 
 
 def _run_options(args):
+    from .calibration.lens import LensPrior
     from .inference import ModelPriors, SamplerSettings
     from .pipeline import RunOptions
 
@@ -105,12 +106,10 @@ def _run_options(args):
                                       stature=args.stature, stature_sd=args.stature_sd)
     sampler = SamplerSettings(n_walkers=args.walkers, max_steps=args.max_steps, n_draws=args.draws,
                               seed=args.seed, moves=args.moves, draws_per_noise_copy=args.draws_per_noise_copy)
-    from .calibration.lens import LensPrior
-
     return RunOptions(priors=priors, sampler=sampler, dist=_parse_dist(args.dist), min_score=args.min_score,
                       overwrite=args.overwrite, camera_side=args.camera_side, progress=_progress(args),
                       branch=args.branch, height_allowance=args.height_allowance, shot=args.shot,
-                      lens=args.lens, lens_prior=LensPrior(sd=args.lens_k1_sd))
+                      lens=args.lens, lens_prior=LensPrior(sd=args.lens_k1_sd), slow_motion=args.slow_motion)
 
 
 def _cmd_run(args):
@@ -418,6 +417,8 @@ def _add_run_options(p):
                         "clip.json 'camera_side' is used when given)")
     g.add_argument("--shot", type=_shot, default="longest", help="with camera cuts in the clip: the shot estimated: "
                    "longest (default), a shot's number (0-based), or all (the clip as one camera: unreliable)")
+    g.add_argument("--slow-motion", type=float, default=1.0, metavar="N", help="a slow-motion replay's slow-down "
+                   "(4: a quarter of real speed); the clip's fps times N is real time (default 1)")
     g.add_argument("--height-allowance", type=_nonneg_float, default=0.008, metavar="SD",
                    help="systematic allowance on the camera height (sd of log height; default 0.008: track tolerances)")
     g.add_argument("--branch", choices=("auto", "narrow", "wide"), default="auto",

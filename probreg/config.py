@@ -40,7 +40,8 @@ def _defaults():
             "draws_per_noise_copy": smp.draws_per_noise_copy,
             "seed": smp.seed, "moves": smp.moves, "camera_side": run.camera_side, "branch": run.branch,
             "min_score": run.min_score, "lens": run.lens,
-            "lens_k1_sd": run.lens_prior.sd, "height_allowance": run.height_allowance, "shot": run.shot}
+            "lens_k1_sd": run.lens_prior.sd, "height_allowance": run.height_allowance, "shot": run.shot,
+            "slow_motion": run.slow_motion}
 
 
 _D = _defaults()
@@ -74,6 +75,8 @@ CONFIG_KEYS = (
         "'auto' (decided by the athlete's motion), 'main' (home-straight stands) or 'far' (across the infield)"),
     Key("camera", "shot", "shot", str, _D["shot"],
         "with camera cuts in a clip: the shot estimated: 'longest', 'all' (one camera: unreliable) or its number"),
+    Key("camera", "slow_motion", "slow_motion", float, _D["slow_motion"],
+        "a slow-motion replay's slow-down (4: recorded at 4x the rate it plays at); 1 = real time"),
     Key("camera", "branch", "branch", str, _D["branch"],
         "family branch: 'auto' (decided by evidence), 'narrow' (long lens far away) or 'wide' (close, steep)"),
     Key("detection", "model", "model", str, "", "ONNX pose model for videos (YOLO-pose or top-down); '' = none"),
@@ -150,6 +153,8 @@ def _convert(path, key, value):
             raise ConfigError(f"{where} must be a number, got {value!r}")
         if key.dest == "height_allowance" and not 0 <= value < float("inf"):
             raise ConfigError(f"{where} must be a finite number >= 0, got {value!r}")
+        if key.dest == "slow_motion" and not 0 < value < float("inf"):
+            raise ConfigError(f"{where} must be a positive factor (4: a quarter of real speed), got {value!r}")
         return float(value)
     if key.kind is int:
         if isinstance(value, bool) or not isinstance(value, int):

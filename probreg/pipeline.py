@@ -36,7 +36,7 @@ from .calibration.lens import LensPrior, lens_registration
 from .calibration.registration import camera_json, register_clip, wrong_size_note
 from .calibration.side import requested_side
 from .filtering import detection_status
-from .geometry import JOINT_NAMES
+from .geometry import JOINT_INDEX, JOINT_NAMES
 from .inference import (STATIC_INTERVAL_SCALE, ModelPriors, angle_bands, bootstrap_noise_ratio, gait_cycle_bands,
                         gait_check, gait_intervals, pattern_cadence_spm, static_interval)
 from .inference.heights import HEIGHT_SYSTEMATIC_SD
@@ -45,8 +45,9 @@ from .inference.sampling import SamplerSettings
 from .inference.evidence import BRANCHES, BranchChoice, laplace_log_evidence
 from .inference.verdict import bone_length_cv, clip_verdict, knee_band_width, knee_flexion_peak, view_obliquity
 from .inference.parallel import default_workers, fork_call, warm_imports
+from .inference.time_base import time_base_check
 from .io.clip import (FPS_RANGE, MIN_ATHLETE_FRAMES, MIN_ATHLETE_JOINTS, ClipFormatError, athlete_frames, load_clip,
-                      write_json)
+                      with_slow_motion, write_json)
 from .io.frames import has_frames
 from .io.output import atomic_output_dir, prepare_output
 from .io.opensim import write_mot, write_trc
@@ -87,6 +88,8 @@ class RunOptions:
     # the camera shot estimated when the clip has cuts (probreg.lanes.shots): "longest", "all" (the
     # clip as one camera: verdict reason "camera cut") or a shot's number (0-based)
     shot: str = "longest"
+    # a slow-motion replay's slow-down: the clip's fps times it is real time (inference.time_base)
+    slow_motion: float = 1.0
 
 
 @dataclass
@@ -360,7 +363,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         raise ValueError(f"shot must be 'longest', 'all' or a shot's number, got {options.shot!r}")
     inputs = [clip_dir, *protect]
     prepare_output(out_dir, inputs=inputs, overwrite=options.overwrite)  # before any work
-    clip = load_clip(clip_dir, min_score=options.min_score)
+    clip = with_slow_motion(load_clip(clip_dir, min_score=options.min_score), options.slow_motion)
     for note in clip.notes:
         log(f"warning: {note}")
     if clip.keypoints_px is None:
@@ -423,6 +426,11 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                   gait_intervals(prop["gait_point"], gait, inflation=options.band_inflation).items()}
         gait_s, gait_status, gait_reasons = gait_check(gait_s, model.stride_frames(), clip.fps)
         joints_med = np.nanmedian(prop["joints_point"], 0)
+        time_base = {**time_base_check(model.kp, clip.fps, joints_med[:, JOINT_INDEX["pelvis"], 2],
+                                       model.stride_frames(), gait_s.get("speed_mps", {}).get("median")),
+                     "slow_motion": options.slow_motion}
+        if time_base["reason"]:  # every time-based gait number is off by the factor
+            gait_status, gait_reasons = "unreliable", [*gait_reasons, time_base["reason"]]
         cycles = gait_cycle_bands(pa, pn, model.contacts, inflation=options.band_inflation, noise_ratio=ratio)
     cams_med = model.cameras_at(height["median"])
     from .geometry.rays import _as_list
@@ -452,7 +460,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         stature_draws=flat[:, 1], stature_prior=options.priors.stature, branch=branch,
         member_sensitivity=sensitivity, lanes_agree=agree, noise_rho=model.noise_rho,
         knee_band_deg=knee_band_width(summ), obliquity_deg=obliquity, knee_peak_deg=knee_peak,
-        left_right_exchanged=exchanged)
+        left_right_exchanged=exchanged, time_base=time_base)
     result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
                        gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
                        verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,
@@ -480,7 +488,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                                      "gait_verdict": gait_status, "gait_verdict_reasons": gait_reasons,
                                      "camera_side": side.to_dict(), "branch": branch.to_json(),
                                      "shots": reg.shots.to_dict(), "input_notes": list(clip.notes), **extra,
-                                     "diagnostics": diag, "timings_s": timings, "height_m": height,
+                                     "time_base": time_base, "diagnostics": diag, "timings_s": timings, "height_m": height,
                                      "height_member_sensitivity": sensitivity,
                                      "height_allowance": options.height_allowance, "athlete": athlete,
                                      "lens": lens_doc, "band_decomposition": decomposition,

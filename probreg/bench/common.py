@@ -30,6 +30,7 @@ BENCHMARKS = {
     "speed": "probreg.bench.speed:run",
     "batch": "probreg.bench.batch:run",
     "cuts": "probreg.bench.cuts:run",
+    "replays": "probreg.bench.replays:run",
 }
 
 

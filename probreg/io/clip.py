@@ -10,7 +10,7 @@ from __future__ import annotations
 import json
 import math
 import re
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 from pathlib import Path
 
 import numpy as np
@@ -23,6 +23,7 @@ __all__ = [
     "Clip",
     "GroundTruth",
     "load_clip",
+    "with_slow_motion",
     "load_groundtruth",
     "read_keypoints_json",
     "write_keypoints_json",
@@ -38,6 +39,35 @@ __all__ = [
 #: that is estimated) needs at least this many such frames
 MIN_ATHLETE_JOINTS = 8
 MIN_ATHLETE_FRAMES = 10
+
+
+def with_slow_motion(clip, factor):
+    """``clip`` in real time: a slow-motion replay recorded at ``factor`` times the frame rate it is
+    played at (``clip.json``'s ``fps``) has ``fps * factor`` frames per second of real time; the
+    clip's notes say so.  ``factor`` 1 returns ``clip`` itself.
+
+    >>> c = Clip(Path("c"), 50.0, (1920, 1080), None, [], 1, 1.22, {})
+    >>> with_slow_motion(c, 4).fps, with_slow_motion(c, 4).notes[-1]
+    (200.0, 'slow motion 4x: 50 fps played, 200 fps of real time')
+    >>> with_slow_motion(c, 0)
+    Traceback (most recent call last):
+    ...
+    ValueError: slow motion must be a positive factor (4 for a replay at a quarter of real speed), got 0
+    """
+    try:
+        f = float(factor)
+    except (TypeError, ValueError):
+        f = float("nan")
+    if not (np.isfinite(f) and f > 0):
+        raise ValueError(f"slow motion must be a positive factor (4 for a replay at a quarter of real speed), got {factor}")
+    if f == 1.0:
+        return clip
+    fps = clip.fps * f
+    if not FPS_RANGE[0] <= fps <= FPS_RANGE[1]:
+        raise ValueError(f"slow motion {f:g}x makes {clip.fps:g} fps into {fps:g} fps of real time, outside "
+                         f"{FPS_RANGE[0]:g}-{FPS_RANGE[1]:g}")
+    return replace(clip, fps=fps, notes=(*clip.notes, f"slow motion {f:g}x: {clip.fps:g} fps played, {fps:g} fps of "
+                                         "real time"))
 
 
 def athlete_frames(keypoints_px):

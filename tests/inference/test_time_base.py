@@ -1,0 +1,103 @@
+"""The clip's time base: a runner bounces under gravity, so a slow-motion replay (or a wrong
+frame rate) shows in the pelvis's motion; known answers, real running capture, the verdict."""
+
+import numpy as np
+import pytest
+
+from probreg.geometry import JOINT_INDEX
+from probreg.inference import clip_verdict
+from probreg.inference.time_base import (BOUNCE_REF_G, MAX_BOUNCE_G, MIN_BOUNCE_G, pelvis_bounce_g,
+                                         stride_frames_any_rate, time_base_check)
+
+
+def _bounce(n, step_frames, amp_m=0.04, trend=0.0, noise=0.0, seed=0):
+    t = np.arange(n)
+    rng = np.random.default_rng(seed)
+    return 0.95 + amp_m * np.cos(2 * np.pi * t / step_frames + 0.7) + trend * t + rng.normal(0, noise, n)
+
+
+def test_bounce_is_the_acceleration_amplitude_at_the_step_frequency():
+    # 4 cm at 3 steps/s: 0.04 (2 pi 3)^2 / 9.81 = 1.449 g, whatever the trend and moderate noise
+    z = _bounce(300, 50 / 3, trend=0.0003, noise=0.01)
+    assert pelvis_bounce_g(z, 50 / 3, 50.0) == pytest.approx(0.04 * (2 * np.pi * 3) ** 2 / 9.81, rel=0.05)
+    # time slowed by s divides it by s^2: the same frames labelled 4x too slow
+    assert pelvis_bounce_g(z, 50 / 3, 12.5) == pytest.approx(pelvis_bounce_g(z, 50 / 3, 50.0) / 16, rel=1e-9)
+
+
+def test_bounce_needs_two_steps_of_heights():
+    z = _bounce(30, 20)
+    assert np.isnan(pelvis_bounce_g(z, 20, 50.0))  # 1.5 steps
+    z[::2] = np.nan
+    assert np.isnan(pelvis_bounce_g(np.r_[z, z], 20, 50.0))  # 30 heights of 60 frames, but 40 needed
+    assert np.isnan(pelvis_bounce_g(_bounce(100, 20), float("nan"), 50.0))
+
+
+@pytest.fixture(scope="module")
+def mocap(shared_data):
+    import glob
+
+    clips = []
+    for f in sorted(glob.glob(str(shared_data / "mocap" / "*.npz"))):
+        d = np.load(f)
+        clips.append((d["joints3d"][:, JOINT_INDEX["pelvis"], 2], float(d["fps"])))
+    if not clips:
+        pytest.skip("no mocap clips")
+    return clips
+
+
+def _step_frames(z, fps):
+    """The step period (frames) of a pelvis height series: the strongest spectral line in 2-4 steps/s."""
+    zz = z - np.polyval(np.polyfit(np.arange(len(z)), z, 2), np.arange(len(z)))
+    freqs = np.linspace(2.0, 4.0, 401)
+    t = np.arange(len(z)) / fps
+    power = [abs(np.sum(zz * np.exp(-2j * np.pi * f * t))) for f in freqs]
+    return fps / freqs[int(np.argmax(power))]
+
+
+def test_real_runners_bounce_near_the_reference_and_a_replay_is_found(mocap):
+    for z, fps in mocap:
+        step = _step_frames(z, fps)
+        g = pelvis_bounce_g(z, step, fps)
+        assert 1.0 < g < 1.6 and MIN_BOUNCE_G < g < MAX_BOUNCE_G
+        assert time_base_check(None, fps, z, stride_frames=2 * step, speed_mps=3.0)["status"] == "ok"
+        # the same capture played as a 4x replay (its file says a quarter of the rate)
+        tb = time_base_check(None, fps / 4, z, stride_frames=2 * step, speed_mps=3.0 / 4)
+        assert tb["status"] == "slow" and tb["reason"].startswith("slow motion about")
+        assert tb["factor"] == pytest.approx(4.0 * np.sqrt(BOUNCE_REF_G / g), rel=1e-6)
+        assert 3.4 < tb["factor"] < 4.6
+        # and as a recording at half the rate its file states (motion twice too fast)
+        assert time_base_check(None, 2 * fps, z, stride_frames=2 * step, speed_mps=6.0)["status"] == "fast"
+
+
+def test_cadence_alone_and_speed_alone_decide_when_the_bounce_is_unknown():
+    tb = time_base_check(None, 50.0, None, stride_frames=140.0, speed_mps=None)  # 43 steps/min
+    assert tb["status"] == "slow" and tb["factor"] == pytest.approx(170 / (6000 / 140))
+    assert time_base_check(None, 50.0, None, stride_frames=16.0)["status"] == "fast"  # 375 steps/min
+    assert time_base_check(None, 50.0, None, stride_frames=35.0, speed_mps=0.9)["status"] == "ok"  # stride rules
+    tb = time_base_check(None, 50.0, None, stride_frames=None, speed_mps=0.9)  # no stride: the speed
+    assert tb["status"] == "slow" and tb["factor"] is None and "no stride repeats" in tb["reason"]
+    assert time_base_check(None, 50.0, None, stride_frames=None, speed_mps=4.0)["status"] == "ok"
+
+
+def test_contradicting_cues_are_unclear():
+    z = _bounce(250, 17.5, amp_m=0.001)  # a bounce of 0.03 g ...
+    tb = time_base_check(None, 50.0, z, stride_frames=15.0 * 2 * 17.5 / 35)  # ... at 400 steps/min
+    assert tb["status"] == "unclear" and tb["reason"].startswith("time base unclear")
+
+
+def test_a_stride_beyond_a_runners_window_is_found_at_the_trial_rates():
+    t = np.arange(500.0)[:, None, None]
+    rng = np.random.default_rng(3)
+    kp = np.concatenate([80 * np.sin(2 * np.pi * t / 150 + np.arange(17)[None, :, None] + [0, 1.3])
+                         + rng.normal(0, 0.5, (500, 17, 2)), np.ones((500, 17, 1))], -1)
+    assert stride_frames_any_rate(kp, 50.0) == pytest.approx(150, abs=2)  # 3 s at 50 fps
+    assert stride_frames_any_rate(kp, 50.0, stride_frames=30.0) == 30.0  # one found already is kept
+    assert np.isnan(stride_frames_any_rate(kp[:120], 50.0))  # under one stride: nothing repeats
+
+
+def test_the_verdict_carries_the_time_base_reason():
+    slow = time_base_check(None, 50.0, _bounce(250, 70.0), stride_frames=140.0, speed_mps=1.1)
+    verdict, reasons = clip_verdict(100, 100, 100, rhat=1.01, ess=900, time_base=slow)
+    assert verdict == "unreliable" and reasons == [slow["reason"]]
+    real = time_base_check(None, 200.0, _bounce(250, 70.0), stride_frames=140.0, speed_mps=4.4)
+    assert real["status"] == "ok" and clip_verdict(100, 100, 100, rhat=1.01, ess=900, time_base=real) == ("ok", [])

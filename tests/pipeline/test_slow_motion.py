@@ -1,0 +1,63 @@
+"""A slow-motion replay: its file states the rate it is played at, not the rate it was recorded
+at.  Run as it is labelled, the clip is flagged (the runner bounces at a quarter of gravity);
+given its slow-down, it runs in real time and its cadence is the runner's."""
+
+import json
+
+import numpy as np
+import pytest
+
+from probreg.cli import main
+
+FAST_RUN = ["--walkers", "20", "--max-steps", "600", "--draws", "8", "--seed", "1", "--quiet"]
+CAPTURE_FPS, PLAYED_FPS = 100.0, 50.0  # a 2x replay
+
+
+@pytest.fixture(scope="module")
+def replay(tmp_path_factory):
+    """140 frames recorded at 100 fps (1.4 s: two strides), labelled 50 fps as the replay plays."""
+    from dataclasses import replace
+
+    from probreg.sim import config_from_preset, synthesize, write_clip
+
+    base = config_from_preset("run", 21, image_size=(1280, 720))
+    clip = write_clip(synthesize(replace(base, n_frames=140, fps=CAPTURE_FPS), seed=21, preset="run"),
+                      tmp_path_factory.mktemp("replay") / "clip", images=True, jobs=1)
+    meta = json.loads((clip / "clip.json").read_text())
+    meta["fps"] = PLAYED_FPS
+    (clip / "clip.json").write_text(json.dumps(meta))
+    athlete = json.loads((clip / "groundtruth" / "athlete.json").read_text())
+    return clip, 60.0 * athlete["gait"]["step_freq_hz"]
+
+
+def _run(clip, out, *extra):
+    code = main(["run", str(clip), "--out", str(out), *extra] + FAST_RUN)
+    return code, json.loads((out / "run.json").read_text()), json.loads((out / "gait.json").read_text())
+
+
+def test_a_replay_run_as_labelled_is_flagged_with_its_slow_down(replay, tmp_path):
+    clip, cadence_true = replay
+    code, run, gait = _run(clip, tmp_path / "as_labelled")
+    tb = run["time_base"]
+    assert code == 3 and run["verdict"] == "unreliable"
+    assert tb["status"] == "slow" and tb["fps"] == PLAYED_FPS and tb["slow_motion"] == 1.0
+    assert 1.5 < tb["factor"] < 2.7  # the true slow-down is 2
+    assert tb["cadence_spm"] == pytest.approx(cadence_true / 2, rel=0.05)
+    assert any(r.startswith("slow motion about") for r in run["verdict_reasons"])
+    assert run["gait_verdict"] == "unreliable" and tb["reason"] in run["gait_verdict_reasons"]
+
+
+def test_given_its_slow_down_the_replay_runs_in_real_time(replay, tmp_path):
+    import csv
+
+    clip, cadence_true = replay
+    code, run, gait = _run(clip, tmp_path / "given", "--slow-motion", "2")
+    tb = run["time_base"]
+    assert tb["status"] == "ok" and tb["reason"] is None and tb["fps"] == CAPTURE_FPS and tb["slow_motion"] == 2.0
+    assert 0.7 < tb["factor"] < 1.35 and not any("motion" in r for r in run["verdict_reasons"])
+    assert tb["cadence_spm"] == pytest.approx(cadence_true, rel=0.05)
+    assert any(n.startswith("slow motion 2x: 50 fps played, 100 fps") for n in run["input_notes"])
+    with open(tmp_path / "given" / "angles.csv", encoding="utf-8") as fh:
+        rows = [(int(r["frame"]), float(r["time_s"])) for r in csv.DictReader(fh)]
+    assert all(t == pytest.approx(f / CAPTURE_FPS, abs=1e-4) for f, t in rows)  # the files' time is real time
+    assert "slow motion" not in json.dumps(gait)
