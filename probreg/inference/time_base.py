@@ -48,7 +48,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["BOUNCE_REF_G", "MIN_BOUNCE_G", "MAX_BOUNCE_G", "RUNNING_CADENCE_SPM", "CADENCE_REF_SPM",
-           "MIN_RUNNING_SPEED_MPS", "FAST_CADENCE_SPM", "G", "pelvis_bounce_g", "stride_frames_any_rate", "time_base_check"]
+           "MIN_RUNNING_SPEED_MPS", "FAST_CADENCE_SPM", "MAX_BOUNCE_AMPLITUDE_M", "G", "pelvis_bounce_g", "stride_frames_any_rate", "time_base_check"]
 
 G = 9.81
 #: the pelvis's acceleration at the step frequency in real running (in g): the middle of the
@@ -59,6 +59,10 @@ MIN_BOUNCE_G = 0.5
 #: above this bounce (g) the clip runs faster than real time (a runner at 1.37 g sped up 2.4x: 8 g;
 #: a pelvis height far off inflates the bounce: 3.9 g on a real-time tuning clip, see the module)
 MAX_BOUNCE_G = 8.0
+#: the largest credible amplitude (m) of the pelvis's bounce: 3.4-4.9 cm in the real running of
+#: ``shared/data/mocap``; a larger fitted one is a pelvis height the lifting got wrong (the amplitude
+#: does not change with the time base, so this bound never hides a replay)
+MAX_BOUNCE_AMPLITUDE_M = 0.15
 #: steps per minute a runner makes in real time: a slow jog (~140) to the fastest sprinters
 #: (~5 steps/s), with margins; below it the motion is slowed (or it is a walk, which probreg's
 #: models do not describe either)
@@ -70,15 +74,19 @@ CADENCE_REF_SPM = 170.0
 #: the slowest running speed (m/s): a brisk walk is 1.5-2 m/s, the slowest jog ~2 m/s
 MIN_RUNNING_SPEED_MPS = 1.5
 #: slow-down factors tried when the stride pattern does not repeat within 0.45-1.6 s at the
-#: clip's own rate (each widens the search to 0.45-1.6 s at ``fps * factor``)
-_TRIAL_FACTORS = (2.0, 4.0, 8.0, 0.5, 0.25)
+#: clip's own rate (each moves the search to 0.45-1.6 s at ``fps * factor``) ...
+_SLOW_FACTORS = (2.0, 4.0, 8.0)
+#: ... and, always, for strides shorter than a runner's (a clip running too fast)
+_FAST_FACTORS = (0.5, 0.25)
 
 
 def stride_frames_any_rate(keypoints_px, fps, stride_frames=None):
-    """The stride period (frames) of the 2-D pattern, searched at the clip's rate and, when no
-    stride repeats there, at the rates a slow-motion or sped-up clip would have
-    (``fps`` times each of ``_TRIAL_FACTORS``); NaN when none repeats (e.g. a replay shorter than
-    1.5 strides of real time).  ``stride_frames``: the period already found at ``fps``.
+    """The stride period (frames) of the 2-D pattern: searched at the clip's rate and, when no
+    stride repeats there, at the rates a slow-motion replay would have (``fps`` times 2, 4, 8);
+    then at the rates of a clip running too fast (``fps`` times 0.5, 0.25), whose shorter lag,
+    when one repeats, is the stride (the longer one spanned several).  NaN when none repeats
+    (e.g. a replay shorter than 1.5 strides of real time).  ``stride_frames``: the period
+    already found at ``fps``.
 
     >>> t = np.arange(400.0)[:, None, None]
     >>> rng = np.random.default_rng(1)
@@ -90,13 +98,17 @@ def stride_frames_any_rate(keypoints_px, fps, stride_frames=None):
     from .gait_check import pattern_stride_frames
 
     sf = float("nan") if stride_frames is None else float(stride_frames)
-    if np.isfinite(sf):
-        return sf
-    for factor in _TRIAL_FACTORS:
-        sf = pattern_stride_frames(keypoints_px, fps * factor)
+    for factor in _SLOW_FACTORS:
         if np.isfinite(sf):
-            return float(sf)
-    return float("nan")
+            break
+        sf = pattern_stride_frames(keypoints_px, fps * factor)
+    # a clip running too fast has strides shorter than the window's 0.45 s: the search at its
+    # rate finds a multiple of them, or none; the stride is the shortest lag that repeats
+    for factor in _FAST_FACTORS:
+        short = pattern_stride_frames(keypoints_px, fps * factor)
+        if np.isfinite(short) and not short >= 0.75 * sf:
+            sf = short
+    return float(sf)
 
 
 def pelvis_bounce_g(pelvis_z_m, step_frames, fps):
@@ -115,8 +127,15 @@ def pelvis_bounce_g(pelvis_z_m, step_frames, fps):
     >>> round(pelvis_bounce_g(z, step, fps / 4), 3)  # ... played as a 4x replay: 1/16 of it
     0.082
     """
-    z = np.asarray(pelvis_z_m, float).ravel()
-    step = float(step_frames)
+    amp = _amplitude(pelvis_z_m, step_frames)
+    return float(amp * (2 * np.pi * fps / float(step_frames)) ** 2 / G) if np.isfinite(amp) else float("nan")
+
+
+def _amplitude(z, period_frames):
+    """Amplitude (m) of the least-squares sinusoid of ``period_frames`` in ``z`` (with a
+    quadratic trend); NaN with fewer than two periods (and 20 frames) of values."""
+    z = np.asarray(z, float).ravel()
+    step = float(period_frames)
     ok = np.isfinite(z)
     if not (np.isfinite(step) and step > 2 and ok.sum() >= max(20, 2 * step)):
         return float("nan")
@@ -125,7 +144,7 @@ def pelvis_bounce_g(pelvis_z_m, step_frames, fps):
     w = 2 * np.pi / step
     A = np.stack([np.ones_like(t), u, u * u, np.cos(w * t), np.sin(w * t)], 1)[ok]
     coef = np.linalg.lstsq(A, z[ok], rcond=None)[0]
-    return float(np.hypot(coef[3], coef[4]) * (w * fps) ** 2 / G)
+    return float(np.hypot(coef[3], coef[4]))
 
 
 def time_base_check(keypoints_px, fps, pelvis_z_m=None, stride_frames=None, speed_mps=None):
@@ -148,7 +167,10 @@ def time_base_check(keypoints_px, fps, pelvis_z_m=None, stride_frames=None, spee
     sf = (stride_frames_any_rate(keypoints_px, fps, stride_frames) if keypoints_px is not None
           else float("nan") if stride_frames is None else float(stride_frames))
     cadence = 120.0 * fps / sf if np.isfinite(sf) and sf > 0 else float("nan")
-    bounce = pelvis_bounce_g(pelvis_z_m, sf / 2, fps) if pelvis_z_m is not None else float("nan")
+    amp = _amplitude(pelvis_z_m, sf / 2) if pelvis_z_m is not None else float("nan")
+    # slow motion changes how fast the pelvis bounces, never how far: a swing beyond a runner's is
+    # a pelvis height the lifting did not measure (the bounce then says nothing about time)
+    bounce = (amp * (2 * np.pi * fps / (sf / 2)) ** 2 / G) if amp <= MAX_BOUNCE_AMPLITUDE_M else float("nan")
     speed = float("nan") if speed_mps is None else float(speed_mps)
     lo, hi = RUNNING_CADENCE_SPM
     # the speed (the ground track, often poor where the pelvis is) only when no stride repeats
@@ -173,5 +195,5 @@ def time_base_check(keypoints_px, fps, pelvis_z_m=None, stride_frames=None, spee
                   + (f" about {size:.1f}x" if np.isfinite(size) else "")
                   + f" ({', '.join(p for p in parts if p)} at {fps:g} fps)")
     nan_none = lambda v: float(v) if np.isfinite(v) else None  # noqa: E731
-    return {"fps": fps, "stride_frames": nan_none(sf), "cadence_spm": nan_none(cadence), "bounce_g": nan_none(bounce),
+    return {"fps": fps, "stride_frames": nan_none(sf), "bounce_amplitude_m": nan_none(amp), "cadence_spm": nan_none(cadence), "bounce_g": nan_none(bounce),
             "speed_mps": nan_none(speed), "status": status, "factor": nan_none(factor), "reason": reason}
