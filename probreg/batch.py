@@ -143,6 +143,8 @@ def read_manifest(path, base_options=None):
                 raise ClipFormatError(f"{path}: line {k}, column 'camera_side': {value!r} is not auto, main or far")
             elif dest == "shot" and not is_shot_option(value):
                 raise ClipFormatError(f"{path}: line {k}, column 'shot': {value!r} is not longest, all or a number")
+            elif dest == "slow_motion" and not 0 < value < float("inf"):
+                raise ClipFormatError(f"{path}: line {k}, column 'slow_motion': {cell!r} is not a positive factor")
             else:
                 opts[dest] = value
         name = name or (clip.stem if clip.suffix else clip.name)

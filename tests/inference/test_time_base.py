@@ -101,3 +101,24 @@ def test_the_verdict_carries_the_time_base_reason():
     assert verdict == "unreliable" and reasons == [slow["reason"]]
     real = time_base_check(None, 200.0, _bounce(250, 70.0), stride_frames=140.0, speed_mps=4.4)
     assert real["status"] == "ok" and clip_verdict(100, 100, 100, rhat=1.01, ess=900, time_base=real) == ("ok", [])
+
+
+def test_a_swing_no_runner_makes_says_nothing_about_time():
+    # the amplitude does not change with the time base: metres of swing are a pelvis the lifting missed
+    z = _bounce(250, 17.5, amp_m=2.0)
+    tb = time_base_check(None, 50.0, z, stride_frames=35.0, speed_mps=4.0)
+    assert tb["bounce_g"] is None and tb["bounce_amplitude_m"] == pytest.approx(2.0, rel=0.01)
+    assert tb["status"] == "ok"  # the cadence, 171 steps/min, decides
+    assert time_base_check(None, 50.0, _bounce(250, 17.5), stride_frames=35.0)["bounce_g"] is not None
+
+
+def test_strides_shorter_than_a_runners_window_are_found():
+    # a 25 fps recording labelled 50 fps: 14 frames a stride (0.28 s), below the 0.45 s window,
+    # where the search at the labelled rate finds two strides (28 frames)
+    t = np.arange(200.0)[:, None, None]
+    rng = np.random.default_rng(5)
+    kp = np.concatenate([80 * np.sin(2 * np.pi * t / 14 + np.arange(17)[None, :, None] + [0, 1.3])
+                         + rng.normal(0, 0.5, (200, 17, 2)), np.ones((200, 17, 1))], -1)
+    assert stride_frames_any_rate(kp, 50.0, stride_frames=28.0) == pytest.approx(14, abs=0.5)
+    tb = time_base_check(kp, 50.0, None, stride_frames=28.0)
+    assert tb["status"] == "fast" and tb["cadence_spm"] == pytest.approx(6000 / 14, rel=0.03)

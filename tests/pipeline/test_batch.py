@@ -33,11 +33,13 @@ def _summary(out):
 def test_manifest_paths_are_relative_to_it_and_options_override(tmp_path):
     (tmp_path / "season").mkdir()
     m = tmp_path / "season" / "m.csv"
-    m.write_text("clip,stature_m,camera_side,seed,shot\nheat1,1.62,far,,\n/abs/heat2.mp4,,,7,1\nheat1,,,,\n")
+    m.write_text("clip,stature_m,camera_side,seed,shot,slow_motion\nheat1,1.62,far,,,4\n/abs/heat2.mp4,,,7,1,\n"
+                 "heat1,,,,,\n")
     e = read_manifest(m, {"seed": 0})
     assert e[0].clip == (tmp_path / "season" / "heat1").resolve() and e[0].options["stature"] == 1.62
     assert e[0].options["camera_side"] == "far" and e[0].options["seed"] == 0
     assert e[1].options["shot"] == "1" and e[0].options["shot"] == "longest"  # the default
+    assert e[0].options["slow_motion"] == 4.0 and e[1].options["slow_motion"] == 1.0  # a replay; real time
     assert e[1].clip == Path("/abs/heat2.mp4") and e[1].name == "heat2" and e[1].options["seed"] == 7
     assert [x.name for x in e] == ["heat1", "heat2", "heat1-2"]  # one result folder per entry
     assert {"stature_m", "camera_side", "model"} <= set(MANIFEST_COLUMNS)
@@ -49,6 +51,7 @@ def test_manifest_paths_are_relative_to_it_and_options_override(tmp_path):
     ("clip,walkers\nx,many\n", "line 2, column 'walkers'"),
     ("clip,camera_side\nx,left\n", "not auto, main or far"),
     ("clip,shot\nx,first\n", "column 'shot': 'first' is not longest, all or a number"),
+    ("clip,slow_motion\nx,0\n", "column 'slow_motion': '0' is not a positive factor"),
     ("clip\n\n,\n", "empty 'clip'"),
 ])
 def test_bad_manifests_name_line_and_column(tmp_path, text, needle, capsys):
@@ -75,8 +78,9 @@ def test_batch_flags_reach_every_entry(tmp_path, monkeypatch):
     m = tmp_path / "m.csv"
     m.write_text("clip\nx\n")
     assert main(["batch", str(m), "--out", str(tmp_path / "o"), "--shot", "1", "--height-allowance", "0.01",
-                 "--camera-side", "far"]) == 130
+                 "--camera-side", "far", "--slow-motion", "3"]) == 130
     assert seen["shot"] == "1" and seen["height_allowance"] == 0.01 and seen["camera_side"] == "far"
+    assert seen["slow_motion"] == 3.0
 
 
 # ----------------------------------------------------------------------------- on a LocalCluster

@@ -49,6 +49,7 @@ def test_default_config_round_trips_to_the_defaults(tmp_path):
     ("[camera]\nshot = 'first'\n", "'longest', 'all' or a shot's number"),
     ("[priors\n", "not valid TOML"),
     ("[priors]\ncamera_height_allowance = -0.1\n", "camera_height_allowance must be a finite number >= 0"),
+    ("[camera]\nslow_motion = 0\n", "slow_motion must be a positive factor"),
 ])
 def test_bad_config_names_file_and_key(tmp_path, text, needle, capsys):
     p = tmp_path / "c.toml"
@@ -191,3 +192,19 @@ def test_the_height_allowance_is_an_option_everywhere_with_one_default(tmp_path,
     err = capsys.readouterr().err
     assert "--height-allowance" in err and "must be a finite number >= 0" in err
     assert not (tmp_path / "o").exists()
+
+
+def test_the_slow_motion_factor_is_an_option_everywhere(tmp_path):
+    """``--slow-motion`` (CLI), ``[camera] slow_motion`` (config) and the manifest column reach
+    RunOptions with one default, real time."""
+    from probreg.batch import DEFAULTS, _run_options as batch_options
+    from probreg.cli import _run_options, build_parser
+    from probreg.pipeline import RunOptions
+
+    assert RunOptions().slow_motion == 1.0 == DEFAULTS["slow_motion"]
+    args = build_parser().parse_args(["run", "clip", "--out", str(tmp_path / "o"), "--slow-motion", "4"])
+    assert _run_options(args).slow_motion == 4.0
+    assert batch_options({**DEFAULTS, "slow_motion": 2.5}).slow_motion == 2.5
+    p = tmp_path / "probreg.toml"
+    p.write_text("[camera]\nslow_motion = 3\n")
+    assert read_config(p)["slow_motion"] == 3.0
