@@ -27,10 +27,20 @@ import numpy as np
 
 from ..geometry import joint_angles
 from ..io.clip import load_groundtruth
-from .common import BenchReport, find_shared_data, md_table
-from .validation import _heldout_clips, _run_cli
+from .common import BenchReport, md_table
+from .validation import _run_cli, judge_dirs, real_time_clips
 
 __all__ = ["run", "score_cut_result"]
+
+
+def knee_errors(gt, out_dir: Path):
+    """Absolute knee-angle errors (deg, both knees, every frame; NaN where the result has none) of a
+    result folder's posterior median against the ground truth ``gt``."""
+    truth = joint_angles(gt.joints3d_track_m)
+    est = joint_angles(np.load(Path(out_dir) / "joints3d.npz")["median"].astype(float))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore", RuntimeWarning)
+        return np.concatenate([np.abs(est[k] - truth[k]) for k in ("knee_l", "knee_r")])
 
 
 def score_cut_result(clip_dir: Path, out_dir: Path):
@@ -40,11 +50,7 @@ def score_cut_result(clip_dir: Path, out_dir: Path):
     run = json.loads((out_dir / "run.json").read_text())
     shots = run.get("shots") or {}
     gt = load_groundtruth(clip_dir)
-    truth = joint_angles(gt.joints3d_track_m)
-    est = joint_angles(np.load(out_dir / "joints3d.npz")["median"].astype(float))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        err = np.concatenate([np.abs(est[k] - truth[k]) for k in ("knee_l", "knee_r")])
+    err = knee_errors(gt, out_dir)
     ok = np.isfinite(err)
     a, b = shots.get("frames_estimated", [0, len(gt.cameras)])
     h_true = float(np.median([c.C[2] for c in gt.cameras[a:b]]))
@@ -102,16 +108,11 @@ def run(args):
     rep = BenchReport("cuts", "Camera cuts: found from the lanes and the colours; one shot estimated")
     rep.add(__doc__.split("\n", 1)[1].strip())
     with tempfile.TemporaryDirectory(prefix="probreg-bench-cuts-") as tmp:
-        root = Path(getattr(args, "suite_dir", None) or Path(tmp) / "cuts")
-        keep = Path(args.keep_outputs) if getattr(args, "keep_outputs", None) else Path(tmp) / "out"
+        root, keep = judge_dirs(args, tmp, "cuts")
         rows, found, knees, knees_all, heights, walls = [], 0, [], [], [], []
         flagged = flagged_all = flagged_before = false_cuts = 0
         clips = _cut_clips(root)
-        shared = find_shared_data(getattr(args, "shared", None))
-        val = shared / "validation" if shared else None
-        no_cut = sorted(p for p in val.iterdir() if (p / "clip.json").exists()) if val is not None and val.is_dir() \
-            else []
-        no_cut += _heldout_clips(Path(getattr(args, "heldout_dir", None) or Path(tmp) / "heldout"))  # written first
+        no_cut = real_time_clips(args, tmp)  # written first
         for clip in clips:
             meta = json.loads((clip / "clip.json").read_text())["generator"]
             res = {}

@@ -23,16 +23,14 @@ from __future__ import annotations
 
 import json
 import tempfile
-import warnings
 from pathlib import Path
 
 import numpy as np
 
-from ..geometry import joint_angles
 from ..io.clip import load_groundtruth
-from .common import BenchReport, find_shared_data, md_table
-from .cuts import _run_kept
-from .validation import _heldout_clips
+from .common import BenchReport, md_table
+from .cuts import _run_kept, knee_errors
+from .validation import judge_dirs, real_time_clips
 
 __all__ = ["score_replay", "run"]
 
@@ -42,11 +40,7 @@ def score_replay(clip_dir: Path, out_dir: Path):
     clip_dir, out_dir = Path(clip_dir), Path(out_dir)
     run = json.loads((out_dir / "run.json").read_text())
     gt = load_groundtruth(clip_dir)
-    truth = joint_angles(gt.joints3d_track_m)
-    est = joint_angles(np.load(out_dir / "joints3d.npz")["median"].astype(float))
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
-        err = np.concatenate([np.abs(est[k] - truth[k]) for k in ("knee_l", "knee_r")])
+    err = knee_errors(gt, out_dir)
     ok = np.isfinite(err)
     gait = json.loads((out_dir / "gait.json").read_text()) if (out_dir / "gait.json").exists() else {}
     step_hz = (gt.athlete.get("gait") or {}).get("step_freq_hz")
@@ -117,8 +111,7 @@ def run(args):
     from ..sim.replays import REPLAY_SEEDS, write_replay_clip
 
     with tempfile.TemporaryDirectory(prefix="probreg-bench-replays-") as tmp:
-        root = Path(getattr(args, "suite_dir", None) or Path(tmp) / "replays")
-        keep = Path(args.keep_outputs) if getattr(args, "keep_outputs", None) else Path(tmp) / "out"
+        root, keep = judge_dirs(args, tmp, "replays")
         clips = [write_replay_clip(root, seed) for seed in REPLAY_SEEDS]
         rows, c = _replay_rows(clips, keep)
         rep.add("## Replay set (probreg's generator, held-out set-ups; 200 frames as played)\n\n" + md_table(
@@ -126,11 +119,7 @@ def run(args):
              "cadence spm: stride pattern / contacts", "true cadence spm", "verdict (reasons)", "given: knee err deg",
              "given: cadence spm, pattern / contacts",
              "given: verdict (reasons)"], rows))
-        shared = find_shared_data(getattr(args, "shared", None))
-        val = shared / "validation" if shared else None
-        real = sorted(p for p in val.iterdir() if (p / "clip.json").exists()) if val is not None and val.is_dir() \
-            else []
-        real += _heldout_clips(Path(getattr(args, "heldout_dir", None) or Path(tmp) / "heldout"))
+        real = real_time_clips(args, tmp)
         real_rows, flagged = [], []
         for clip in real:
             out = keep / clip.name

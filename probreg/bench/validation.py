@@ -202,6 +202,23 @@ def _heldout_clips(root):
     return [root / n for n in names]
 
 
+def judge_dirs(args, tmp, name):
+    """``(suite root, kept outputs)`` of a benchmark on a generated judge set: ``--suite-dir`` and
+    ``--keep-outputs`` when given, else folders under the temporary ``tmp``."""
+    root = Path(getattr(args, "suite_dir", None) or Path(tmp) / name)
+    keep = Path(args.keep_outputs) if getattr(args, "keep_outputs", None) else Path(tmp) / "out"
+    return root, keep
+
+
+def real_time_clips(args, tmp):
+    """The validation clips (when ``shared/data`` is found) and the held-out clips (``--heldout-dir``,
+    written there when missing): the clips a check must leave alone."""
+    shared = find_shared_data(getattr(args, "shared", None))
+    val = shared / "validation" if shared else None
+    clips = sorted(p for p in val.iterdir() if (p / "clip.json").exists()) if val is not None and val.is_dir() else []
+    return clips + _heldout_clips(Path(getattr(args, "heldout_dir", None) or Path(tmp) / "heldout"))
+
+
 def _score_set(clips, peer, tmp):
     rows, scores = [], {}
     for clip in clips:

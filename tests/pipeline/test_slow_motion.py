@@ -35,9 +35,15 @@ def _run(clip, out, *extra):
     return code, json.loads((out / "run.json").read_text()), json.loads((out / "gait.json").read_text())
 
 
-def test_a_replay_run_as_labelled_is_flagged_with_its_slow_down(replay, tmp_path):
+@pytest.fixture(scope="module")
+def as_labelled(replay, tmp_path_factory):
+    out = tmp_path_factory.mktemp("labelled") / "res"
+    return (out, *_run(replay[0], out))
+
+
+def test_a_replay_run_as_labelled_is_flagged_with_its_slow_down(replay, as_labelled):
     clip, cadence_true = replay
-    code, run, gait = _run(clip, tmp_path / "as_labelled")
+    out, code, run, gait = as_labelled
     tb = run["time_base"]
     assert code == 3 and run["verdict"] == "unreliable"
     assert tb["status"] == "slow" and tb["fps"] == PLAYED_FPS and tb["slow_motion"] == 1.0
@@ -61,3 +67,13 @@ def test_given_its_slow_down_the_replay_runs_in_real_time(replay, tmp_path):
         rows = [(int(r["frame"]), float(r["time_s"])) for r in csv.DictReader(fh)]
     assert all(t == pytest.approx(f / CAPTURE_FPS, abs=1e-4) for f, t in rows)  # the files' time is real time
     assert "slow motion" not in json.dumps(gait)
+
+
+def test_the_replay_benchmark_scores_a_result_against_the_truth(replay, as_labelled):
+    from probreg.bench.replays import score_replay
+
+    clip, cadence_true = replay
+    s = score_replay(clip, as_labelled[0])
+    assert s["status"] == "slow" and s["cadence_true_spm"] == pytest.approx(cadence_true)
+    assert s["pattern_cadence_spm"] == pytest.approx(cadence_true / 2, rel=0.05)
+    assert 0 < s["knee_deg"] < 15 and s["verdict"] == "unreliable"
