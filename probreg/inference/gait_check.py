@@ -20,6 +20,10 @@ every other clip half a stride (the legs swapped) mismatches at least 8 times mo
 ``cadence x steps/min from the contacts, y from the stride pattern``
     the two differ by more than :data:`CADENCE_TOLERANCE` (a factor of two either way is
     reported too: which of them is wrong cannot be told);
+``cadence x steps/min from the contacts, outside a runner's (120-330)``
+    no stride pattern to compare with (a clip shorter than 1.5 strides), and the contacts'
+    cadence is not a runner's (:data:`probreg.inference.time_base.RUNNING_CADENCE_SPM`; seen at
+    200-300 fps of real time, where contacts split: 818-18000 steps/min);
 ``touchdowns too few for a cadence``
     the contacts gave no cadence at all;
 ``contact time x s longer than a step (y s)``
@@ -33,6 +37,8 @@ clip verdict is not touched: the angles do not rest on the contacts' timing.
 from __future__ import annotations
 
 import numpy as np
+
+from .time_base import RUNNING_CADENCE_SPM
 
 __all__ = ["CADENCE_TOLERANCE", "CONTACT_NUMBERS", "HALF_LAG_RATIO", "gait_check", "pattern_cadence_spm",
            "pattern_stride_frames"]
@@ -106,6 +112,8 @@ def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE):
     ('unreliable', ['cadence 180 steps/min from the contacts, 150 from the stride pattern'], 'unreliable', 'ok')
     >>> gait_check({"cadence_spm": {"median": 180.0}, "contact_time_s": {"median": 0.5}}, None, 50.0)[2]
     ['contact time 0.50 s longer than a step (0.33 s)']
+    >>> gait_check({"cadence_spm": {"median": 1000.0}}, None, 200.0)[2]  # no stride pattern to compare with
+    ["cadence 1000 steps/min from the contacts, outside a runner's (120-330)"]
     """
     reasons = []
     cadence = _median(gait, "cadence_spm")
@@ -113,8 +121,11 @@ def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE):
         reasons.append("touchdowns too few for a cadence")
     else:
         pattern = pattern_cadence_spm(stride_frames, fps)
+        lo, hi = RUNNING_CADENCE_SPM
         if np.isfinite(pattern) and abs(cadence / pattern - 1.0) > tolerance:
             reasons.append(f"cadence {cadence:.0f} steps/min from the contacts, {pattern:.0f} from the stride pattern")
+        elif not np.isfinite(pattern) and not lo <= cadence <= hi:  # nothing to compare with: a runner's range
+            reasons.append(f"cadence {cadence:.0f} steps/min from the contacts, outside a runner's ({lo:.0f}-{hi:.0f})")
         contact, step = _median(gait, "contact_time_s"), 60.0 / cadence
         if np.isfinite(contact) and contact > 1.1 * step:
             reasons.append(f"contact time {contact:.2f} s longer than a step ({step:.2f} s)")
