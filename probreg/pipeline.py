@@ -37,6 +37,7 @@ from .calibration.registration import camera_json, register_clip, wrong_size_not
 from .calibration.side import requested_side
 from .filtering import detection_status
 from .geometry import JOINT_INDEX, JOINT_NAMES
+from .geometry.rays import _as_list
 from .inference import (STATIC_INTERVAL_SCALE, ModelPriors, angle_bands, bootstrap_noise_ratio, gait_cycle_bands,
                         gait_check, gait_intervals, pattern_cadence_spm, static_interval)
 from .inference.heights import HEIGHT_SYSTEMATIC_SD
@@ -115,6 +116,7 @@ class RunResult:
     branch: object = None  # the family branch (probreg.inference.evidence.BranchChoice)
     band_noise_ratio: dict = field(default_factory=dict)  # run.json's: bands.bootstrap_noise_ratio
     gait_verdict_reasons: tuple = ()  # run.json's: probreg.inference.gait_check (gait.json's "status")
+    time_base: dict = field(default_factory=dict)  # run.json's: probreg.inference.time_base.time_base_check
 
 
 #: report figures drawn in a forked process while the files are written (html.run_figures); the
@@ -432,10 +434,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         if time_base["reason"]:  # every time-based gait number is off by the factor
             gait_status, gait_reasons = "unreliable", [*gait_reasons, time_base["reason"]]
         cycles = gait_cycle_bands(pa, pn, model.contacts, inflation=options.band_inflation, noise_ratio=ratio)
-    cams_med = model.cameras_at(height["median"])
-    from .geometry.rays import _as_list
-
-    cam_list = _as_list(cams_med)
+    cam_list = _as_list(model.cameras_at(height["median"]))
     timings = {"total_s": time.perf_counter() - t0, "lanes_s": t1 - t0, **model.timings}
     out_dir = Path(out_dir)
     n_angle = int(np.sum(np.any(np.isfinite(np.array([v[0] for v in summ.values()])), axis=0)))
@@ -465,7 +464,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                        gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
                        verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,
                        frame_status=status, lens=lens_doc, band_decomposition=decomposition,
-                       branch=branch, athlete=athlete, band_noise_ratio=ratio, gait_verdict_reasons=tuple(gait_reasons))
+                       branch=branch, athlete=athlete, band_noise_ratio=ratio, gait_verdict_reasons=tuple(gait_reasons),
+                       time_base=time_base)
     with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=inputs, log=log) as tmp:
         if options.report:  # most figures render on the other core while the files are written here
             figures = fork_call(lambda: render_figures(clip, result, REPORT_FIGURES_ELSEWHERE))

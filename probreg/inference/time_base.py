@@ -48,7 +48,8 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["BOUNCE_REF_G", "MIN_BOUNCE_G", "MAX_BOUNCE_G", "RUNNING_CADENCE_SPM", "CADENCE_REF_SPM",
-           "MIN_RUNNING_SPEED_MPS", "FAST_CADENCE_SPM", "MAX_BOUNCE_AMPLITUDE_M", "G", "pelvis_bounce_g", "stride_frames_any_rate", "time_base_check"]
+           "MIN_RUNNING_SPEED_MPS", "FAST_CADENCE_SPM", "MAX_BOUNCE_AMPLITUDE_M", "G", "pelvis_bounce_g",
+           "stride_frames_any_rate", "time_base_check"]
 
 G = 9.81
 #: the pelvis's acceleration at the step frequency in real running (in g): the middle of the
@@ -195,5 +196,6 @@ def time_base_check(keypoints_px, fps, pelvis_z_m=None, stride_frames=None, spee
                   + (f" about {size:.1f}x" if np.isfinite(size) else "")
                   + f" ({', '.join(p for p in parts if p)} at {fps:g} fps)")
     nan_none = lambda v: float(v) if np.isfinite(v) else None  # noqa: E731
-    return {"fps": fps, "stride_frames": nan_none(sf), "bounce_amplitude_m": nan_none(amp), "cadence_spm": nan_none(cadence), "bounce_g": nan_none(bounce),
+    return {"fps": fps, "stride_frames": nan_none(sf), "bounce_amplitude_m": nan_none(amp),
+            "cadence_spm": nan_none(cadence), "bounce_g": nan_none(bounce),
             "speed_mps": nan_none(speed), "status": status, "factor": nan_none(factor), "reason": reason}

@@ -59,7 +59,8 @@ def with_slow_motion(clip, factor):
     except (TypeError, ValueError):
         f = float("nan")
     if not (np.isfinite(f) and f > 0):
-        raise ValueError(f"slow motion must be a positive factor (4 for a replay at a quarter of real speed), got {factor}")
+        raise ValueError(f"slow motion must be a positive factor (4 for a replay at a quarter of real speed), "
+                         f"got {factor}")
     if f == 1.0:
         return clip
     fps = clip.fps * f

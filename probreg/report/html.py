@@ -286,6 +286,8 @@ def run_report(out_html, clip, result, joints_median, cameras, rendered=None):
                       f"between the main stand and across the infield).", cls="note")
     for note in (n for n in getattr(clip, "notes", ()) if str(n).startswith("camera cut")):
         rep.paragraph(f"Camera shots: {note} (grey in the per-frame status strip; probreg.lanes.shots).", cls="note")
+    if tb := getattr(result, "time_base", None):
+        rep.paragraph(time_base_sentence(tb), cls="note")
     d = result.diagnostics
     h = result.height
     post = result.posterior.posterior
@@ -540,6 +542,25 @@ def sampler_figure(idata, max_points=800):
 
 
 #: the groups of a band decomposition, in the order (and colours) they are stacked
+def time_base_sentence(tb):
+    """One sentence on the clip's time base (``run.json`` ``time_base``) for the report.
+
+    >>> s = time_base_sentence({"fps": 50.0, "status": "ok", "bounce_g": 1.31, "cadence_spm": 172.4, "slow_motion": 1})
+    >>> s.split("; ")[0], "1.31 g at the step frequency" in s, "172 steps/min, a runner's" in s
+    ('Time base: 50 fps taken as real time', True, True)
+    """
+    f = lambda k, fmt: fmt.format(tb[k]) if tb.get(k) is not None else "n/a"  # noqa: E731
+    given = f", with --slow-motion {tb['slow_motion']:g}" if tb.get("slow_motion", 1.0) != 1.0 else ""
+    what = ("a runner's" if tb.get("status") == "ok" else
+            f"not a runner's in real time: {tb.get('reason')}; give a replay's slow-down with --slow-motion N")
+    bounce = (f"the pelvis bounces at {f('bounce_g', '{:.2f} g')} at the step frequency" if tb.get("bounce_g")
+              is not None else "the pelvis bounce was not measured")
+    cadence = (f"the stride pattern gives {f('cadence_spm', '{:.0f} steps/min')}" if tb.get("cadence_spm") is not None
+               else "no stride repeats")
+    return (f"Time base: {tb['fps']:g} fps taken as real time{given}; {bounce} and {cadence}, {what} "
+            "(probreg.inference.time_base).")
+
+
 DECOMPOSITION_GROUPS = (("lens", "tab:purple"), ("camera", "tab:blue"), ("limbs", "tab:green"),
                         ("keypoints", "tab:orange"))
 

@@ -51,6 +51,8 @@ def test_a_replay_run_as_labelled_is_flagged_with_its_slow_down(replay, as_label
     assert tb["cadence_spm"] == pytest.approx(cadence_true / 2, rel=0.05)
     assert any(r.startswith("slow motion about") for r in run["verdict_reasons"])
     assert run["gait_verdict"] == "unreliable" and tb["reason"] in run["gait_verdict_reasons"]
+    report = (out / "report.html").read_text()
+    assert "Time base: 50 fps taken as real time" in report and "--slow-motion N" in report
 
 
 def test_given_its_slow_down_the_replay_runs_in_real_time(replay, tmp_path):
