@@ -247,12 +247,12 @@ def _cmd_calibrate(args):
 
 
 def _cmd_lift(args):
-    from .io.clip import atomic_output_dir, load_clip, read_cameras_json, write_json
+    from .io.clip import atomic_output_dir, load_clip, read_cameras_json, with_slow_motion, write_json
     from .io.results import write_angles_csv, write_joints_npz
     from .lifting import LiftConfig, lift
 
     _prepare_out(args.out, [args.clip, args.cameras], args.overwrite)
-    clip = load_clip(args.clip, min_score=args.min_score)
+    clip = with_slow_motion(load_clip(args.clip, min_score=args.min_score), args.slow_motion)
     for note in clip.notes:
         print(f"warning: {note}", file=sys.stderr)
     if clip.keypoints_px is None:
@@ -533,10 +533,10 @@ def build_parser():
     lf.add_argument("clip", type=Path)
     lf.add_argument("--cameras", type=Path, required=True, help="camera.json / cameras.json layout of CLIP_FORMAT")
     lf.add_argument("--out", type=Path, required=True)
-    lf.add_argument("--segments", type=Path, default=None,
-                    help="JSON of segment lengths (m), e.g. groundtruth/athlete.json; estimated when absent")
+    lf.add_argument("--segments", type=Path, default=None, help="JSON of segment lengths (m); estimated when absent")
     lf.add_argument("--min-score", type=float, default=0.3)
     lf.add_argument("--no-smooth", action="store_true", help="no outlier rejection / low-pass of keypoints")
+    lf.add_argument("--slow-motion", type=float, default=1.0, metavar="N", help="a replay's slow-down (as in run)")
     lf.add_argument("--overwrite", action="store_true", help="move a non-empty foreign --out aside (never deleted)")
     lf.set_defaults(func=_cmd_lift)
 

@@ -79,3 +79,17 @@ def test_the_replay_benchmark_scores_a_result_against_the_truth(replay, as_label
     assert s["status"] == "slow" and s["cadence_true_spm"] == pytest.approx(cadence_true)
     assert s["pattern_cadence_spm"] == pytest.approx(cadence_true / 2, rel=0.05)
     assert 0 < s["knee_deg"] < 15 and s["verdict"] == "unreliable"
+
+
+def test_lift_takes_the_slow_down_too(replay, tmp_path):
+    import csv
+
+    clip, _ = replay
+    out = tmp_path / "lifted"
+    assert main(["lift", str(clip), "--cameras", str(clip / "groundtruth" / "cameras.json"), "--segments",
+                 str(clip / "groundtruth" / "athlete.json"), "--out", str(out), "--slow-motion", "2"]) == 0
+    with open(out / "angles.csv", encoding="utf-8") as fh:
+        rows = [(int(r["frame"]), float(r["time_s"])) for r in csv.DictReader(fh)]
+    assert rows and all(t == pytest.approx(f / CAPTURE_FPS, abs=1e-4) for f, t in rows)
+    assert main(["lift", str(clip), "--cameras", str(clip / "groundtruth" / "cameras.json"), "--out",
+                 str(tmp_path / "bad"), "--slow-motion", "-1"]) == 2
