@@ -429,7 +429,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         gait_s, gait_status, gait_reasons = gait_check(gait_s, model.stride_frames(), clip.fps)
         joints_med = np.nanmedian(prop["joints_point"], 0)
         time_base = {**time_base_check(model.kp, clip.fps, joints_med[:, JOINT_INDEX["pelvis"], 2],
-                                       model.stride_frames(), gait_s.get("speed_mps", {}).get("median")),
+                                       model.stride_frames(), gait_s.get("speed_mps", {}).get("median"), model.raw),
                      "slow_motion": options.slow_motion}
         if time_base["reason"]:  # every time-based gait number is off by the factor
             gait_status, gait_reasons = "unreliable", [*gait_reasons, time_base["reason"]]

@@ -145,7 +145,7 @@ reason of its own, a short machine-readable string with the number that triggere
     alone (the other frames: status ``other_shot``), and this reason does not arise; taken as
     one, a cut from a 9 m main-stand camera 30 m away to an 11 m one 40 m away gave knee errors
     of 38 deg with every other check passing.
-``slow motion about Nx (...)``, ``fast motion ...``, ``time base unclear (...)``
+``slow motion about Nx (...)``, ``fast motion ...``, ``time base unclear (...)``, ``repeated frames (...)``
     the clip does not run in real time (a slow-motion replay, or a wrong frame rate): the
     pelvis's bounce under gravity, the cadence or the speed say so
     (:mod:`probreg.inference.time_base`; ``run.json`` ``"time_base"``).
@@ -264,6 +264,11 @@ REASON_HELP = {
         ("the clip switches cameras, and it was estimated as one static camera (--shot all): the "
          "camera height is pulled between two cameras, and every angle may be far off"),
         "run one shot at a time (the default estimates the longest; --shot N picks shot N)",
+    ),
+    "repeated frames": (
+        ("the stream repeats its frames (e.g. 25 fps content in a 50 fps stream): the motion stops every "
+         "other frame, which the noise model and the smoothing read as motion, and the bands are far too narrow"),
+        "give the frames once each: extract the clip at its content's frame rate",
     ),
     **dict.fromkeys(("slow motion", "fast motion", "time base unclear"), (
         ("the clip's time does not run at its frame rate (a slow-motion replay, or a wrong fps): every "
@@ -466,7 +471,8 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
                  log_height_prior_sd=None, side=None, bone_cv_pct=None, speed_mps=None,
                  stature_draws=None, stature_prior=None, branch=None, member_sensitivity=None,
                  lanes_agree=None, noise_rho=None, knee_band_deg=None, obliquity_deg=None, knee_peak_deg=None,
-                 left_right_exchanged=None, cuts=None, time_base=None, thresholds: VerdictThresholds = VerdictThresholds()):
+                 left_right_exchanged=None, cuts=None, time_base=None,
+                 thresholds: VerdictThresholds = VerdictThresholds()):
     """The clip verdict and its reasons.
 
     Parameters
@@ -607,7 +613,8 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
     if cuts:
         reasons.append(f"camera cut at frame{'s' if len(cuts) > 1 else ''} {', '.join(map(str, cuts))} "
                        "(taken as one camera)")
-    if time_base and time_base.get("reason"):
-        reasons.append(time_base["reason"])
+    for key in ("reason", "repeats_reason"):
+        if time_base and time_base.get(key):
+            reasons.append(time_base[key])
     verdict = "uncalibrated" if uncal else ("unreliable" if reasons else "ok")
     return verdict, reasons

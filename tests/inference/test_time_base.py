@@ -122,3 +122,35 @@ def test_strides_shorter_than_a_runners_window_are_found():
     assert stride_frames_any_rate(kp, 50.0, stride_frames=28.0) == pytest.approx(14, abs=0.5)
     tb = time_base_check(kp, 50.0, None, stride_frames=28.0)
     assert tb["status"] == "fast" and tb["cadence_spm"] == pytest.approx(6000 / 14, rel=0.03)
+
+
+def test_repeated_frames_are_counted_against_the_pairs_that_can_repeat():
+    from probreg.inference.time_base import repeated_frames
+
+    kp = np.random.default_rng(2).normal(500, 30, (50, 17, 3))
+    assert repeated_frames(kp) == (0, 49)
+    doubled = np.repeat(kp, 2, axis=0)
+    assert repeated_frames(doubled) == (50, 99)
+    frozen = kp.copy()
+    frozen[10:20] = frozen[10]  # a frozen stretch: 9 repeats
+    assert repeated_frames(frozen) == (9, 49)
+    gaps = doubled.copy()
+    gaps[1::2, 3:] = np.nan  # the copies keep 3 joints: no pair to judge
+    assert repeated_frames(gaps) == (0, 0)
+    near = doubled.copy()
+    near[1::2, :, :2] += 0.02  # re-encoded copies move a hundredth of a pixel: still repeats
+    assert repeated_frames(near)[0] == 50
+
+
+def test_a_stream_that_repeats_its_frames_is_flagged():
+    kp = np.random.default_rng(3).normal(500, 30, (100, 17, 3))
+    z = _bounce(200, 17.5)
+    tb = time_base_check(None, 50.0, z, stride_frames=35.0, speed_mps=4.0, raw_keypoints_px=np.repeat(kp, 2, 0))
+    assert tb["status"] == "ok" and tb["repeated_frames"] == 100 and tb["frame_pairs"] == 199
+    assert tb["repeats_reason"] == "repeated frames (100 of 199 repeat the one before: 50 fps holds 24.9 fps of motion)"
+    verdict, reasons = clip_verdict(100, 100, 100, rhat=1.01, ess=900, time_base=tb)
+    assert verdict == "unreliable" and reasons == [tb["repeats_reason"]]
+    one = np.repeat(kp, 2, 0)[:110]  # a few repeats (5 of 109) are below the 10 % limit
+    tb = time_base_check(None, 50.0, z, stride_frames=35.0, speed_mps=4.0,
+                         raw_keypoints_px=np.concatenate([one[:10], kp[10:]]))
+    assert tb["repeats_reason"] is None and tb["repeated_frames"] == 5

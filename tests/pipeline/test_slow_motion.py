@@ -93,3 +93,26 @@ def test_lift_takes_the_slow_down_too(replay, tmp_path):
     assert rows and all(t == pytest.approx(f / CAPTURE_FPS, abs=1e-4) for f, t in rows)
     assert main(["lift", str(clip), "--cameras", str(clip / "groundtruth" / "cameras.json"), "--out",
                  str(tmp_path / "bad"), "--slow-motion", "-1"]) == 2
+
+
+def test_a_stream_that_repeats_its_frames_is_flagged(replay, tmp_path):
+    """The replay's frames given twice each (as 25 fps content is carried in a 50 fps stream):
+    the clip's keypoints repeat every other frame, and the verdict says so."""
+    import shutil
+
+    clip, _ = replay
+    dup = tmp_path / "doubled"
+    (dup / "frames").mkdir(parents=True)
+    frames = sorted((clip / "frames").iterdir())[:70]
+    for i, f in enumerate(frames):
+        for k in (0, 1):
+            shutil.copy(f, dup / "frames" / f"{2 * i + k:06d}.jpg")
+    kp = json.loads((clip / "keypoints2d.json").read_text())
+    kp["frames"] = [dict(fr, frame=2 * i + k) for i, fr in enumerate(kp["frames"][:70]) for k in (0, 1)]
+    (dup / "keypoints2d.json").write_text(json.dumps(kp))
+    meta = json.loads((clip / "clip.json").read_text())
+    (dup / "clip.json").write_text(json.dumps({**meta, "fps": 2 * CAPTURE_FPS, "n_frames": 140}))
+    code, run, _ = _run(dup, tmp_path / "res")
+    tb = run["time_base"]
+    assert code == 3 and tb["repeated_frames"] >= 65 and tb["frame_pairs"] <= 139
+    assert any(r.startswith("repeated frames (") for r in run["verdict_reasons"])
