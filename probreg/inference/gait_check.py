@@ -22,7 +22,7 @@ every other clip half a stride (the legs swapped) mismatches at least 8 times mo
     reported too: which of them is wrong cannot be told);
 ``cadence x steps/min from the contacts, outside a runner's (120-330)``
     no stride pattern to compare with (a clip shorter than 1.5 strides), and the contacts'
-    cadence is not a runner's (:data:`probreg.inference.time_base.RUNNING_CADENCE_SPM`; seen at
+    cadence is not a runner's (:data:`RUNNING_CADENCE_SPM`; seen at
     200-300 fps of real time, where contacts split: 818-18000 steps/min);
 ``touchdowns too few for a cadence``
     the contacts gave no cadence at all;
@@ -38,10 +38,13 @@ from __future__ import annotations
 
 import numpy as np
 
-from .time_base import RUNNING_CADENCE_SPM
+__all__ = ["CADENCE_TOLERANCE", "CONTACT_NUMBERS", "RUNNING_CADENCE_SPM", "HALF_LAG_RATIO", "gait_check",
+           "pattern_cadence_spm", "pattern_stride_frames"]
 
-__all__ = ["CADENCE_TOLERANCE", "CONTACT_NUMBERS", "HALF_LAG_RATIO", "gait_check", "pattern_cadence_spm",
-           "pattern_stride_frames"]
+#: steps per minute a runner makes in real time: a slow jog (~140) to the fastest sprinters
+#: (~5 steps/s), with margins; below it the motion is slowed (or it is a walk, which probreg's
+#: models do not describe either) (also :mod:`probreg.inference.time_base`'s)
+RUNNING_CADENCE_SPM = (120.0, 330.0)
 
 #: the gait numbers that rest on the detected contacts (``speed_mps`` does not: the ground track)
 CONTACT_NUMBERS = ("cadence_spm", "step_length_m", "contact_time_s", "flight_time_s",

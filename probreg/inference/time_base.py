@@ -57,6 +57,8 @@ from __future__ import annotations
 
 import numpy as np
 
+from .gait_check import RUNNING_CADENCE_SPM, pattern_stride_frames
+
 __all__ = ["BOUNCE_REF_G", "MIN_BOUNCE_G", "MAX_BOUNCE_G", "RUNNING_CADENCE_SPM", "CADENCE_REF_SPM",
            "MIN_RUNNING_SPEED_MPS", "FAST_CADENCE_SPM", "MAX_BOUNCE_AMPLITUDE_M", "G", "pelvis_bounce_g",
            "stride_frames_any_rate", "time_base_check", "repeated_frames", "REPEAT_MAX_SHIFT_PX",
@@ -80,10 +82,6 @@ MAX_BOUNCE_AMPLITUDE_M = 0.15
 REPEAT_MAX_SHIFT_PX = 0.05
 #: repeated frames above this share of the frame pairs make the clip unreliable
 MAX_REPEATED_FRACTION = 0.1
-#: steps per minute a runner makes in real time: a slow jog (~140) to the fastest sprinters
-#: (~5 steps/s), with margins; below it the motion is slowed (or it is a walk, which probreg's
-#: models do not describe either)
-RUNNING_CADENCE_SPM = (120.0, 330.0)
 #: with a bounce above half of :data:`MAX_BOUNCE_G`, a cadence above this (steps/min) is too fast
 FAST_CADENCE_SPM = 240.0
 #: a typical runner's cadence (steps/min), the factor's reference when the bounce is not known
@@ -112,8 +110,6 @@ def stride_frames_any_rate(keypoints_px, fps, stride_frames=None):
     >>> round(stride_frames_any_rate(kp, 50.0) / 10) * 10  # 2.8 s at 50 fps: beyond a runner's 1.6 s
     140
     """
-    from .gait_check import pattern_stride_frames
-
     sf = float("nan") if stride_frames is None else float(stride_frames)
     for factor in _SLOW_FACTORS:
         if np.isfinite(sf):
