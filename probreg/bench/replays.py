@@ -63,6 +63,10 @@ def _fmt(v, f="{:.2f}"):
     return "n/a" if v is None or not np.isfinite(v) else f.format(v)
 
 
+def _verdict_text(score):
+    return score["verdict"] + (f" ({'; '.join(score['reasons'])})" if score["reasons"] else "")
+
+
 def _replay_rows(clips, keep):
     rows, counts = [], {"found": 0, "replays": 0, "false": 0, "realtime": 0, "knee": [], "knee_given": [],
                         "cad": [], "cad_given": [], "contacts_given": [], "ok_given": 0,
@@ -70,7 +74,7 @@ def _replay_rows(clips, keep):
     for clip in clips:
         gen = json.loads((clip / "clip.json").read_text())["generator"]
         factor = float(gen["slow_motion"])
-        code, wall = _run_kept(clip, keep / clip.name, ())
+        _run_kept(clip, keep / clip.name, ())
         s = score_replay(clip, keep / clip.name) if (keep / clip.name / "run.json").exists() else None
         g = None
         if factor != 1:
@@ -99,9 +103,8 @@ def _replay_rows(clips, keep):
         cad = lambda r: f"{_fmt(r['pattern_cadence_spm'], '{:.0f}')} / {_fmt(r['cadence_spm'], '{:.0f}')}"  # noqa: E731
         rows.append([clip.name, f"{factor:g}", f"{s['status']} (want {want})", _fmt(s["factor"]),
                      _fmt(s["bounce_g"]), s["knee_deg"], cad(s), _fmt(s["cadence_true_spm"], "{:.0f}"),
-                     s["verdict"] + (f" ({'; '.join(s['reasons'])})" if s["reasons"] else ""),
-                     g["knee_deg"] if g else float("nan"), cad(g) if g else "n/a",
-                     (g["verdict"] + (f" ({'; '.join(g['reasons'])})" if g["reasons"] else "")) if g else "n/a"])
+                     _verdict_text(s), g["knee_deg"] if g else float("nan"), cad(g) if g else "n/a",
+                     _verdict_text(g) if g else "n/a"])
     return rows, counts
 
 

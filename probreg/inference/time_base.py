@@ -140,8 +140,12 @@ def pelvis_bounce_g(pelvis_z_m, step_frames, fps):
     >>> round(pelvis_bounce_g(z, step, fps / 4), 3)  # ... played as a 4x replay: 1/16 of it
     0.082
     """
-    amp = _amplitude(pelvis_z_m, step_frames)
-    return float(amp * (2 * np.pi * fps / float(step_frames)) ** 2 / G) if np.isfinite(amp) else float("nan")
+    return _in_g(_amplitude(pelvis_z_m, step_frames), step_frames, fps)
+
+
+def _in_g(amplitude_m, step_frames, fps):
+    """The acceleration amplitude (g) of a sinusoid of ``amplitude_m`` and period ``step_frames``."""
+    return float(amplitude_m * (2 * np.pi * fps / float(step_frames)) ** 2 / G)
 
 
 def _amplitude(z, period_frames):
@@ -185,10 +189,12 @@ def repeated_frames(keypoints_px):
 def time_base_check(keypoints_px, fps, pelvis_z_m=None, stride_frames=None, speed_mps=None, raw_keypoints_px=None):
     """Does the clip run in real time?  A dict for ``run.json`` ``"time_base"``: ``fps`` (the rate
     the run used), ``stride_frames``, ``cadence_spm``, ``bounce_g`` (:func:`pelvis_bounce_g`),
-    ``speed_mps``, ``status`` (``"ok"``, ``"slow"``, ``"fast"``; ``"unclear"`` when cues
-    point both ways), ``factor`` (the estimated
-    slow-down: 4 for a 4x replay, 0.5 for a clip running twice too fast; NaN when not known)
-    and ``reason`` (the verdict reason, None when ok).  See the module docstring.
+    ``bounce_amplitude_m``, ``speed_mps``, ``status`` (``"ok"``, ``"slow"``, ``"fast"``;
+    ``"unclear"`` when cues point both ways), ``factor`` (the estimated slow-down: 4 for a 4x
+    replay, 0.5 for a clip running twice too fast; None when not known), ``reason`` (the verdict
+    reason, None when ok), and ``repeated_frames``, ``frame_pairs`` and ``repeats_reason``
+    (:func:`repeated_frames` of ``raw_keypoints_px``, the detector's own keypoints, default
+    ``keypoints_px``).  See the module docstring.
 
     >>> t = np.arange(250)
     >>> z = 0.95 + 0.04 * np.cos(2 * np.pi * t / 70.0)  # a 4x replay at 50 fps: steps of 1.4 s
@@ -205,7 +211,7 @@ def time_base_check(keypoints_px, fps, pelvis_z_m=None, stride_frames=None, spee
     amp = _amplitude(pelvis_z_m, sf / 2) if pelvis_z_m is not None else float("nan")
     # slow motion changes how fast the pelvis bounces, never how far: a swing beyond a runner's is
     # a pelvis height the lifting did not measure (the bounce then says nothing about time)
-    bounce = (amp * (2 * np.pi * fps / (sf / 2)) ** 2 / G) if amp <= MAX_BOUNCE_AMPLITUDE_M else float("nan")
+    bounce = _in_g(amp, sf / 2, fps) if amp <= MAX_BOUNCE_AMPLITUDE_M else float("nan")
     speed = float("nan") if speed_mps is None else float(speed_mps)
     lo, hi = RUNNING_CADENCE_SPM
     # the speed (the ground track, often poor where the pelvis is) only when no stride repeats

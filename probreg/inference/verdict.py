@@ -145,10 +145,13 @@ reason of its own, a short machine-readable string with the number that triggere
     alone (the other frames: status ``other_shot``), and this reason does not arise; taken as
     one, a cut from a 9 m main-stand camera 30 m away to an 11 m one 40 m away gave knee errors
     of 38 deg with every other check passing.
-``slow motion about Nx (...)``, ``fast motion ...``, ``time base unclear (...)``, ``repeated frames (...)``
+``slow motion about Nx (...)``, ``fast motion ...``, ``time base unclear (...)``
     the clip does not run in real time (a slow-motion replay, or a wrong frame rate): the
     pelvis's bounce under gravity, the cadence or the speed say so
     (:mod:`probreg.inference.time_base`; ``run.json`` ``"time_base"``).
+``repeated frames (n of m repeat the one before: ...)``
+    the stream repeats its frames (25 fps content in a 50 fps stream, frozen frames):
+    :func:`probreg.inference.time_base.repeated_frames`.
 """
 
 from __future__ import annotations

@@ -541,7 +541,6 @@ def sampler_figure(idata, max_points=800):
     return fig
 
 
-#: the groups of a band decomposition, in the order (and colours) they are stacked
 def time_base_sentence(tb):
     """One sentence on the clip's time base (``run.json`` ``time_base``) for the report.
 
@@ -549,18 +548,18 @@ def time_base_sentence(tb):
     >>> s.split("; ")[0], "1.31 g at the step frequency" in s, "172 steps/min, a runner's" in s
     ('Time base: 50 fps taken as real time', True, True)
     """
-    f = lambda k, fmt: fmt.format(tb[k]) if tb.get(k) is not None else "n/a"  # noqa: E731
     given = f", with --slow-motion {tb['slow_motion']:g}" if tb.get("slow_motion", 1.0) != 1.0 else ""
     what = ("a runner's" if tb.get("status") == "ok" else
             f"not a runner's in real time: {tb.get('reason')}; give a replay's slow-down with --slow-motion N")
-    bounce = (f"the pelvis bounces at {f('bounce_g', '{:.2f} g')} at the step frequency" if tb.get("bounce_g")
-              is not None else "the pelvis bounce was not measured")
-    cadence = (f"the stride pattern gives {f('cadence_spm', '{:.0f} steps/min')}" if tb.get("cadence_spm") is not None
+    bounce = (f"the pelvis bounces at {tb['bounce_g']:.2f} g at the step frequency" if tb.get("bounce_g") is not None
+              else "the pelvis bounce was not measured")
+    cadence = (f"the stride pattern gives {tb['cadence_spm']:.0f} steps/min" if tb.get("cadence_spm") is not None
                else "no stride repeats")
     return (f"Time base: {tb['fps']:g} fps taken as real time{given}; {bounce} and {cadence}, {what} "
             "(probreg.inference.time_base).")
 
 
+#: the groups of a band decomposition, in the order (and colours) they are stacked
 DECOMPOSITION_GROUPS = (("lens", "tab:purple"), ("camera", "tab:blue"), ("limbs", "tab:green"),
                         ("keypoints", "tab:orange"))
 

@@ -17,9 +17,13 @@ replays, factor 1 a clip in real time, and factor 0.5 a 25 fps recording labelle
 from __future__ import annotations
 
 import json
+import shutil
+import tempfile
 from dataclasses import replace
 from pathlib import Path
 
+from ..io.clip import atomic_output_dir
+from ..io.output import MARKER
 from .heldout import heldout_config
 from .synth import synthesize, write_clip
 
@@ -49,15 +53,26 @@ def replay_config(seed, n_frames=200):
 
 
 def write_replay_clip(root, seed, n_frames=200, jobs=None):
-    """Write the replay clip of ``seed`` to ``root/<name>`` (:func:`replay_config`; a clip written
-    there before is kept, and labelled again); returns its path."""
+    """Write the replay clip of ``seed`` to ``root/<name>`` (:func:`replay_config`) atomically,
+    labelled with the played rate (:func:`probreg.io.clip.atomic_output_dir`: a folder that holds
+    files probreg did not write is refused); a replay clip of this seed written there before is
+    kept.  Returns its path."""
     cfg, played, factor, name = replay_config(seed, n_frames)
     out = Path(root) / name
-    if not ((out / "clip.json").exists() and (out / "groundtruth" / "joints3d.npy").exists()):
-        write_clip(synthesize(cfg, seed=int(seed), preset="replay"), out, images=True, jobs=jobs)
-    meta = json.loads((out / "clip.json").read_text())  # labelled with the played rate (again: idempotent)
-    meta["fps"] = played
-    meta["generator"] = {**meta.get("generator", {}), "name": "probreg.sim.replays", "seed": int(seed),
-                         "slow_motion": factor, "capture_fps": cfg.fps}
-    (out / "clip.json").write_text(json.dumps(meta, indent=1))
+    try:
+        gen = json.loads((out / "clip.json").read_text()).get("generator", {})
+    except (OSError, ValueError):
+        gen = {}
+    if gen.get("name") == "probreg.sim.replays" and gen.get("seed") == int(seed) and (out / MARKER).exists():
+        return out
+    with tempfile.TemporaryDirectory(prefix="probreg-replay-") as tmp, atomic_output_dir(out) as final:
+        src = write_clip(synthesize(cfg, seed=int(seed), preset="replay"), Path(tmp) / name, images=True, jobs=jobs)
+        for item in src.iterdir():
+            if item.name != MARKER:
+                shutil.move(str(item), final / item.name)
+        meta = json.loads((final / "clip.json").read_text())
+        meta["fps"] = played
+        meta["generator"] = {**meta["generator"], "name": "probreg.sim.replays", "seed": int(seed),
+                             "slow_motion": factor, "capture_fps": cfg.fps}
+        (final / "clip.json").write_text(json.dumps(meta, indent=1))
     return out
