@@ -81,8 +81,14 @@ def _run_kept(clip, out, extra):
     """``probreg run`` into ``out`` (see :func:`probreg.bench.validation._run_cli`), or the kept result
     of an earlier run of this benchmark there (its exit code and wall time stored beside it)."""
     note = out.parent / f"{out.name}.bench.json"
-    if (out / "run.json").exists() and note.exists():
-        doc = json.loads(note.read_text())
+    try:
+        doc = json.loads(note.read_text()) if note.exists() else None
+    except (OSError, ValueError):
+        doc = {}
+    if doc is not None and (not isinstance(doc, dict) or set(doc) != {"exit", "wall_s"}):
+        raise FileExistsError(f"{note}: not a note of this benchmark; it is left as it is (choose another "
+                              "--keep-outputs)")
+    if doc is not None and (out / "run.json").exists():
         return doc["exit"], doc["wall_s"]
     code, dt, _ = _run_cli(clip, out, extra)
     note.parent.mkdir(parents=True, exist_ok=True)

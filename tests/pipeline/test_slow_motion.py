@@ -116,3 +116,12 @@ def test_a_stream_that_repeats_its_frames_is_flagged(replay, tmp_path):
     tb = run["time_base"]
     assert code == 3 and tb["repeated_frames"] >= 65 and tb["frame_pairs"] <= 139
     assert any(r.startswith("repeated frames (") for r in run["verdict_reasons"])
+
+
+def test_a_kept_output_note_of_someone_else_is_never_overwritten(tmp_path):
+    from probreg.bench.cuts import _run_kept
+
+    (tmp_path / "x.bench.json").write_text('{"mine": 1}')
+    with pytest.raises(FileExistsError, match="not a note of this benchmark"):
+        _run_kept(tmp_path / "clip", tmp_path / "x", ())
+    assert (tmp_path / "x.bench.json").read_text() == '{"mine": 1}'
