@@ -39,7 +39,7 @@ from .filtering import detection_status
 from .geometry import JOINT_INDEX, JOINT_NAMES
 from .geometry.rays import _as_list
 from .inference import (STATIC_INTERVAL_SCALE, ModelPriors, angle_bands, bootstrap_noise_ratio, gait_cycle_bands,
-                        gait_check, gait_intervals, pattern_cadence_spm, static_interval)
+                        gait_check, gait_intervals, pattern_cadence_spm, stance_slide, static_interval)
 from .inference.heights import HEIGHT_SYSTEMATIC_SD
 from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationError
 from .inference.sampling import SamplerSettings
@@ -426,15 +426,16 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         summ = angle_bands(pa, pn, clip.fps, inflation=options.band_inflation, noise_ratio=ratio)
         gait_s = {k: {"median": m, "lo": lo, "hi": hi, "unit": GAIT_FIELDS[k]} for k, (m, lo, hi) in
                   gait_intervals(prop["gait_point"], gait, inflation=options.band_inflation).items()}
-        gait_s, gait_status, gait_reasons = gait_check(gait_s, model.stride_frames(), clip.fps)
         joints_med = np.nanmedian(prop["joints_point"], 0)
+        cam_list = _as_list(model.cameras_at(height["median"]))
+        diag["stance_slide"] = slide = stance_slide(cam_list, joints_med, clip.fps)  # do planted feet stand?
+        gait_s, gait_status, gait_reasons = gait_check(gait_s, model.stride_frames(), clip.fps, slide=slide)
         time_base = {**time_base_check(model.kp, clip.fps, joints_med[:, JOINT_INDEX["pelvis"], 2],
                                        model.stride_frames(), gait_s.get("speed_mps", {}).get("median"), model.raw),
                      "slow_motion": options.slow_motion}
         if time_base["reason"]:  # every time-based gait number is off by the factor
             gait_status, gait_reasons = "unreliable", [*gait_reasons, time_base["reason"]]
         cycles = gait_cycle_bands(pa, pn, model.contacts, inflation=options.band_inflation, noise_ratio=ratio)
-    cam_list = _as_list(model.cameras_at(height["median"]))
     timings = {"total_s": time.perf_counter() - t0, "lanes_s": t1 - t0, **model.timings}
     out_dir = Path(out_dir)
     n_angle = int(np.sum(np.any(np.isfinite(np.array([v[0] for v in summ.values()])), axis=0)))
@@ -470,20 +471,18 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         if options.report:  # most figures render on the other core while the files are written here
             figures = fork_call(lambda: render_figures(clip, result, REPORT_FIGURES_ELSEWHERE))
         _copy_extra(tmp, extra_files)
-        write_angles_csv(tmp / "angles.csv", clip.fps, {k: v[0] for k, v in summ.items()},
-                         {k: v[1] for k, v in summ.items()}, {k: v[2] for k, v in summ.items()})
+        bands = [{k: v[i] for k, v in summ.items()} for i in range(3)]  # median, lo, hi per angle
+        write_angles_csv(tmp / "angles.csv", clip.fps, *bands)
         write_joints_npz(tmp / "joints3d.npz", joints_med, samples=joints)
         write_trc(tmp / "markers.trc", joints_med, clip.fps)
-        write_mot(tmp / "angles.mot", clip.fps, {k: v[0] for k, v in summ.items()},
-                  {k: v[1] for k, v in summ.items()}, {k: v[2] for k, v in summ.items()})
+        write_mot(tmp / "angles.mot", clip.fps, *bands)
         write_gait_cycle_csv(tmp / "gait_cycle.csv", cycles)
         cj = camera_json(cam_list, height["median"], clip.n_frames, height["lo"], height["hi"])
         cj["k1"] = {k: lens_doc[k] for k in ("median", "lo", "hi", "source")}
         write_json(tmp / "camera.json", cj)
         idata.to_netcdf(str(tmp / "posterior.nc"))
         write_json(tmp / "gait.json", gait_s)
-        kpo = clip.keypoints_outside
-        extra = {} if kpo is None else {"keypoints_outside_image": kpo.tolist()}
+        extra = {} if (kpo := clip.keypoints_outside) is None else {"keypoints_outside_image": kpo.tolist()}
         write_json(tmp / "run.json", {"verdict": verdict, "verdict_reasons": reasons,
                                      "gait_verdict": gait_status, "gait_verdict_reasons": gait_reasons,
                                      "camera_side": side.to_dict(), "branch": branch.to_json(),

@@ -31,6 +31,7 @@ BENCHMARKS = {
     "batch": "probreg.bench.batch:run",
     "cuts": "probreg.bench.cuts:run",
     "replays": "probreg.bench.replays:run",
+    "rails": "probreg.bench.rails:run",
 }
 
 

@@ -27,7 +27,20 @@ every other clip half a stride (the legs swapped) mismatches at least 8 times mo
 ``touchdowns too few for a cadence``
     the contacts gave no cadence at all;
 ``contact time x s longer than a step (y s)``
-    no flight phase: not running, or contacts merged across steps.
+    no flight phase: not running, or contacts merged across steps;
+``feet slide back (stance ankles at x times the pelvis speed)``
+    a foot on the ground stands still, so in any frame where one ankle is planted the slower
+    ankle's along-track speed is about 0; here it runs backwards (:func:`stance_slide`: the
+    slower ankle's 20th-percentile speed, read across the viewing rays, is below
+    -:data:`MAX_STANCE_BACKSLIDE` times the pelvis's mean speed).  The along-track positions do not
+    hold together: the camera moved along the track (a rail or tracking camera; probreg assumes
+    a static one), or the per-frame pan is off (lanes nearly parallel in a long lens) and
+    carries the runner back and forth.  Then the speed, the step length and the contacts are
+    wrong too, and every gait number is marked unreliable, the speed included.  (Designed on
+    the tuning twins 7501-7520, static cameras: at most -0.51 on a 25 fps steep view (-1.18 on a
+    clip whose scale was wrong); rails at a quarter of the runner's speed -0.17 and -0.31, at half
+    -0.53 to -0.73, at three quarters -2.6 and -6.5 (seeds 7601-7608).  The judged rail set and
+    the static clips' rate are in ``reports/bench_rails.md``.)
 
 Any of them makes the gait verdict ``"unreliable"`` (``run.json`` ``gait_verdict`` and
 ``gait_verdict_reasons``; each contact-based number in ``gait.json`` has ``"status"``). The
@@ -38,8 +51,8 @@ from __future__ import annotations
 
 import numpy as np
 
-__all__ = ["CADENCE_TOLERANCE", "CONTACT_NUMBERS", "RUNNING_CADENCE_SPM", "HALF_LAG_RATIO", "gait_check",
-           "pattern_cadence_spm", "pattern_stride_frames"]
+__all__ = ["CADENCE_TOLERANCE", "CONTACT_NUMBERS", "RUNNING_CADENCE_SPM", "HALF_LAG_RATIO", "MAX_STANCE_BACKSLIDE",
+           "gait_check", "pattern_cadence_spm", "pattern_stride_frames", "stance_slide"]
 
 #: steps per minute a runner makes in real time: a slow jog (~140) to the fastest sprinters
 #: (~5 steps/s), with margins; below it the motion is slowed (or it is a walk, which probreg's
@@ -57,6 +70,18 @@ CONTACT_NUMBERS = ("cadence_spm", "step_length_m", "contact_time_s", "flight_tim
 #: two strides, which :func:`pattern_stride_frames` now halves: 30 pass, 1.8 %, 9 flagged); at 8 %
 #: the passed clips held errors up to 7.5 %.
 CADENCE_TOLERANCE = 0.05
+
+
+#: the slower ankle may run backwards at most this share of the pelvis's speed (20th percentile)
+#: before the feet count as sliding: a camera on a rail at a third of the runner's speed gives
+#: -0.5 (a foot planted on the ground, seen from a camera moving at ``f`` of the runner's speed,
+#: runs back at ``f / (1 - f)`` of the runner's apparent speed)
+MAX_STANCE_BACKSLIDE = 0.5
+#: half-width (s) of the central difference that gives the ankles' speed, and the smallest share
+#: of the running direction across the viewing ray (below it the ray runs along the track, where
+#: a cast ankle's position is mostly depth noise) for a frame to count
+SLIDE_HALF_WINDOW_S = 0.06
+SLIDE_MIN_ACROSS = 0.5
 
 
 #: a stride lag whose half repeats the 2-D pattern with less than this times its own mismatch is
@@ -99,13 +124,80 @@ def pattern_cadence_spm(stride_frames, fps):
     return 120.0 * fps / sf if np.isfinite(sf) and sf > 0 else float("nan")
 
 
-def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE):
+def stance_slide(cameras, joints_track_m, fps):
+    """Do the planted feet stand still?  ``{"backslide", "speed_mps", "frames"}``.
+
+    Per frame the along-track speed of each ankle (central difference over
+    +-:data:`SLIDE_HALF_WINDOW_S`), read from its motion across the viewing ray (divided by the
+    running direction's share across it; frames where that share is below
+    :data:`SLIDE_MIN_ACROSS` are left out: there the cast ankle moves mostly with depth noise),
+    and the slower of the two ankles.  ``backslide`` is its 20th percentile over the clip as a
+    share of the pelvis's mean speed (its displacement over the clip): ~0 or above when a
+    planted foot stands still, ``-f / (1 - f)`` for a camera moving at ``f`` of the runner's
+    speed.  NaN (and ``frames`` below 10) when too few frames can be read.
+
+    ``cameras``: per frame a :class:`probreg.geometry.Camera` or None, or (F, 3) centres;
+    ``joints_track_m``: (F, 17, 3).
+
+    >>> fps, t = 50.0, np.arange(100) / 50.0
+    >>> def foot(phase):  # planted half of the time, then swinging: a mean of 5 m/s
+    ...     return np.cumsum(np.maximum(0.0, 5 * np.pi * np.sin(2 * np.pi * 1.5 * t + phase))) / fps
+    >>> def joints(shift):  # pelvis at 5 m/s; the frame moves with the camera at ``shift`` m/s
+    ...     j = np.zeros((100, 17, 3)); j[:, :, 0] = (5 * t)[:, None]
+    ...     j[:, 3, 0], j[:, 6, 0] = foot(0.0), foot(np.pi)
+    ...     j[..., 0] -= shift * t[:, None]
+    ...     return j
+    >>> cams = np.tile([0.0, -40.0, 10.0], (100, 1))
+    >>> abs(stance_slide(cams, joints(0.0), fps)["backslide"]) < 0.01  # static camera
+    True
+    >>> round(stance_slide(cams, joints(2.5), fps)["backslide"], 2)  # on a rail at half the speed
+    -1.0
+    """
+    from ..geometry import JOINT_INDEX
+
+    if not isinstance(cameras, np.ndarray):
+        cameras = np.array([np.full(3, np.nan) if c is None else getattr(c, "C", c) for c in cameras], float)
+    C = np.asarray(cameras, float).reshape(-1, 3)[:, :2]
+    J = np.asarray(joints_track_m, float)
+    nan = {"backslide": float("nan"), "speed_mps": float("nan"), "frames": 0}
+    pelvis = J[:, JOINT_INDEX["pelvis"], :2]
+    idx = np.flatnonzero(np.all(np.isfinite(pelvis), 1))
+    h = max(1, int(round(SLIDE_HALF_WINDOW_S * fps)))
+    if len(idx) < 2 or len(J) <= 2 * h or len(C) != len(J):
+        return nan
+    travel = pelvis[idx[-1]] - pelvis[idx[0]]
+    dist = float(np.hypot(*travel))
+    speed = dist * fps / (idx[-1] - idx[0])
+    if dist < 1e-6:
+        return {**nan, "speed_mps": speed}
+    u = travel / dist
+    with np.errstate(invalid="ignore", divide="ignore"):
+        along = []
+        for name in ("l_ankle", "r_ankle"):
+            xy = J[:, JOINT_INDEX[name], :2]
+            vel = np.full_like(xy, np.nan)
+            vel[h:-h] = (xy[2 * h:] - xy[:-2 * h]) * fps / (2 * h)
+            ray = xy - C
+            ray /= np.linalg.norm(ray, axis=-1, keepdims=True)
+            across = np.stack([-ray[:, 1], ray[:, 0]], -1)  # unit, horizontal, across the ray
+            share = across @ u
+            along.append(np.where(np.abs(share) >= SLIDE_MIN_ACROSS, np.sum(vel * across, -1) / share, np.nan))
+        slower = np.fmin(*along)
+    v = slower[np.isfinite(slower)]
+    if len(v) < 10:
+        return {**nan, "speed_mps": speed, "frames": int(len(v))}
+    return {"backslide": float(np.percentile(v, 20) / speed), "speed_mps": speed, "frames": int(len(v))}
+
+
+def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE, slide=None):
     """The gait verdict: ``(gait, status, reasons)``, ``gait`` a copy of the summary
     ({name: {"median", "lo", "hi", "unit"}}) whose contact-based numbers carry
     ``"status"`` (``"ok"`` or ``"unreliable"``; ``speed_mps`` is always ``"ok"``).
 
     ``stride_frames`` is the clip's stride period from the 2-D pattern (frames; NaN or None
     when the clip shows no repeating strides: then the cadence is not cross-checked).
+    ``slide`` is :func:`stance_slide`'s result: feet sliding back make every number unreliable,
+    the speed too.
 
     >>> g = {"cadence_spm": {"median": 180.0}, "contact_time_s": {"median": 0.15}, "speed_mps": {"median": 6.0}}
     >>> gait_check(g, 33.3, 50.0)[1:]
@@ -115,6 +207,9 @@ def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE):
     ('unreliable', ['cadence 180 steps/min from the contacts, 150 from the stride pattern'], 'unreliable', 'ok')
     >>> gait_check({"cadence_spm": {"median": 180.0}, "contact_time_s": {"median": 0.5}}, None, 50.0)[2]
     ['contact time 0.50 s longer than a step (0.33 s)']
+    >>> out, status, reasons = gait_check(g, 33.3, 50.0, slide={"backslide": -0.9})
+    >>> reasons, out["speed_mps"]["status"]
+    (['feet slide back (stance ankles at -0.90 times the pelvis speed)'], 'unreliable')
     >>> gait_check({"cadence_spm": {"median": 1000.0}}, None, 200.0)[2]  # no stride pattern to compare with
     ["cadence 1000 steps/min from the contacts, outside a runner's (120-330)"]
     """
@@ -132,8 +227,12 @@ def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE):
         contact, step = _median(gait, "contact_time_s"), 60.0 / cadence
         if np.isfinite(contact) and contact > 1.1 * step:
             reasons.append(f"contact time {contact:.2f} s longer than a step ({step:.2f} s)")
+    backslide = float("nan") if not slide else float(slide.get("backslide", float("nan")))
+    sliding = bool(np.isfinite(backslide) and backslide < -MAX_STANCE_BACKSLIDE)
+    if sliding:
+        reasons.append(f"feet slide back (stance ankles at {backslide:.2f} times the pelvis speed)")
     status = "unreliable" if reasons else "ok"
-    out = {k: {**v, "status": status if k in CONTACT_NUMBERS else "ok"} for k, v in gait.items()}
+    out = {k: {**v, "status": status if k in CONTACT_NUMBERS or sliding else "ok"} for k, v in gait.items()}
     return out, status, reasons
 
 

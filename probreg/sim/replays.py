@@ -27,7 +27,7 @@ from ..io.output import MARKER
 from .heldout import heldout_config
 from .synth import synthesize, write_clip
 
-__all__ = ["REPLAY_SEEDS", "REPLAY_FACTORS", "replay_config", "write_replay_clip"]
+__all__ = ["REPLAY_SEEDS", "REPLAY_FACTORS", "replay_config", "write_replay_clip", "write_generated_clip"]
 
 #: seeds of the replay set (24 clips, four per factor), fixed before any run
 REPLAY_SEEDS = tuple(range(9701, 9725))
@@ -58,21 +58,29 @@ def write_replay_clip(root, seed, n_frames=200, jobs=None):
     files probreg did not write is refused); a replay clip of this seed written there before is
     kept.  Returns its path."""
     cfg, played, factor, name = replay_config(seed, n_frames)
-    out = Path(root) / name
+    return write_generated_clip(Path(root) / name, cfg, seed, "probreg.sim.replays",
+                                {"slow_motion": factor, "capture_fps": cfg.fps}, "replay", fps=played, jobs=jobs)
+
+
+def write_generated_clip(out, cfg, seed, generator, extra, preset, fps=None, jobs=None):
+    """Write the clip of ``cfg`` (``seed``) to ``out`` atomically, its ``clip.json`` ``"generator"``
+    named ``generator`` (``preset`` recorded) with ``extra`` entries and its frame rate labelled
+    ``fps`` (default: the recorded one).  A folder that holds files probreg did not write is refused; one this
+    generator wrote for this seed before is kept as it is.  Returns ``out``."""
+    out = Path(out)
     try:
         gen = json.loads((out / "clip.json").read_text()).get("generator", {})
     except (OSError, ValueError):
         gen = {}
-    if gen.get("name") == "probreg.sim.replays" and gen.get("seed") == int(seed) and (out / MARKER).exists():
+    if gen.get("name") == generator and gen.get("seed") == int(seed) and (out / MARKER).exists():
         return out
-    with tempfile.TemporaryDirectory(prefix="probreg-replay-") as tmp, atomic_output_dir(out) as final:
-        src = write_clip(synthesize(cfg, seed=int(seed), preset="replay"), Path(tmp) / name, images=True, jobs=jobs)
+    with tempfile.TemporaryDirectory(prefix="probreg-clip-") as tmp, atomic_output_dir(out) as final:
+        src = write_clip(synthesize(cfg, seed=int(seed), preset=preset), Path(tmp) / out.name, images=True, jobs=jobs)
         for item in src.iterdir():
             if item.name != MARKER:
                 shutil.move(str(item), final / item.name)
         meta = json.loads((final / "clip.json").read_text())
-        meta["fps"] = played
-        meta["generator"] = {**meta["generator"], "name": "probreg.sim.replays", "seed": int(seed),
-                             "slow_motion": factor, "capture_fps": cfg.fps}
+        meta["fps"] = float(cfg.fps if fps is None else fps)
+        meta["generator"] = {**meta["generator"], "name": generator, "seed": int(seed), **extra}
         (final / "clip.json").write_text(json.dumps(meta, indent=1))
     return out

@@ -61,6 +61,11 @@ class CameraSetup:
         Relative amplitude of a slow zoom change over the clip.
     dist : tuple of 5 float
         OpenCV lens distortion.
+    rail_frac : float
+        A camera on a rail along the track (or a tracking vehicle): it moves along ``x`` at this
+        share of the runner's mean speed, in the runner's direction (0: the static broadcast
+        camera; 1: it keeps pace).  It is at ``along_m`` at mid-clip and keeps aiming at the
+        runner.  probreg assumes a static camera: such a clip tests that it says so.
     """
 
     height_m: float = 12.0
@@ -75,6 +80,7 @@ class CameraSetup:
     roll_deg: float = 0.3
     zoom_drift: float = 0.03
     dist: tuple = (0.0, 0.0, 0.0, 0.0, 0.0)
+    rail_frac: float = 0.0
 
     def __post_init__(self):
         if not (np.isfinite(self.height_m) and 0 < self.height_m <= 100):
@@ -88,6 +94,8 @@ class CameraSetup:
             raise ValueError("athlete height in pixels must be positive")
         if len(self.dist) != 5 or not np.all(np.isfinite(self.dist)):
             raise ValueError("dist must be 5 finite OpenCV coefficients [k1, k2, p1, p2, k3]")
+        if not (np.isfinite(self.rail_frac) and 0 <= self.rail_frac <= 1.5):
+            raise ValueError(f"rail_frac (share of the runner's speed) must lie in [0, 1.5], got {self.rail_frac}")
 
 
 @dataclass(frozen=True)
@@ -261,7 +269,8 @@ def simulate_broadcast_cameras(setup: CameraSetup, motion: RunnerMotion, image_s
                                lane_y_m, mid_x_m):
     """Per-frame cameras of a static broadcast camera following the runner.
 
-    The camera centre is fixed; pan/tilt follow the pelvis with a first-order
+    The camera centre is fixed (on a rail, ``setup.rail_frac > 0``, it moves along ``x`` at that
+    share of the runner's mean speed, through its static position at mid-clip); pan/tilt follow the pelvis with a first-order
     lag, a random-walk jitter and a framing offset; zoom holds the athlete at
     about ``athlete_height_px`` with a slow drift.
     """
@@ -288,8 +297,11 @@ def simulate_broadcast_cameras(setup: CameraSetup, motion: RunnerMotion, image_s
     focal = f0 * (1 + setup.zoom_drift * np.sin(2 * np.pi * t / max(t[-1] + 1 / fps, 1.0) + phase))
     focal = np.clip(focal, focal_from_fov(hi, w), focal_from_fov(lo, w))
     jitter = np.cumsum(rng.normal(0, setup.jitter_deg, (n, 2)), axis=0)
+    centres = np.repeat(C[None], n, axis=0)
+    centres[:, 0] += setup.rail_frac * velocity[0] * (t - t[(n - 1) // 2]) if n else 0.0
     cams = []
     for i in range(n):
+        C = centres[i]
         R = look_at_rotation(C, smooth[i])
         # framing offset and jitter: rotate about the camera's own axes
         ox = np.arctan(setup.offset_frac[0] * w / focal[i]) + np.radians(jitter[i, 0])

@@ -191,6 +191,41 @@ def test_held_out_seeds_are_kept_apart_from_the_development_sets():
     assert len(set(held_lens)) == len(held_lens) == 16
     assert not developed & set(held_lens)
     assert not (developed | set(held_lens)) & set(HELDOUT_SEEDS)
+    from probreg.sim.rails import RAIL_SEEDS
+    from probreg.sim.replays import REPLAY_SEEDS
+
+    judged = [set(HELDOUT_SEEDS), set(REPLAY_SEEDS), set(RAIL_SEEDS)]
+    assert not any(a & b for i, a in enumerate(judged) for b in judged[i + 1:])
+    assert not (developed | set(held_lens)) & (set(REPLAY_SEEDS) | set(RAIL_SEEDS))
+    assert not set(range(7601, 7609)) & set(RAIL_SEEDS)  # the check's design clips
     for _, preset, seed in SUITES["lens_heldout"][:4]:
         k1 = config_from_preset(preset, seed).camera.dist[0]
         assert 0.1 <= abs(k1) <= 0.25
+
+
+def test_a_rail_camera_moves_along_the_track_at_its_share_of_the_runners_speed():
+    """``rail_frac`` moves the camera centre along x at that share of the runner's mean speed,
+    through its static position at mid-clip, aiming at the runner; 0 keeps the clip unchanged."""
+    from dataclasses import replace
+
+    from probreg.sim.rails import RAIL_SEEDS, rail_config
+
+    base = config_from_preset("run", 5, n_frames=60)
+    static = synthesize(base, seed=5)
+    rail = synthesize(replace(base, camera=replace(base.camera, rail_frac=0.5)), seed=5)
+    C0 = np.array([c.C for c in static.cameras])
+    C1 = np.array([c.C for c in rail.cameras])
+    assert np.ptp(C0, axis=0).max() == 0.0
+    pelvis = static.motion.joints_track_m[:, JOINT_INDEX["pelvis"], 0]
+    runner = (pelvis[-1] - pelvis[0]) / ((len(pelvis) - 1) / base.fps)
+    camera = (C1[-1, 0] - C1[0, 0]) / ((len(C1) - 1) / base.fps)
+    assert camera == pytest.approx(0.5 * runner, rel=1e-6)
+    assert np.allclose(C1[:, 1:], C0[:, 1:]) and np.allclose(C1[29], C0[29])
+    assert np.allclose(rail.motion.joints_track_m, static.motion.joints_track_m)
+    # the runner stays in view: projected pelvis inside the image in every frame
+    px = np.array([c.project(p[None])[0] for c, p in zip(rail.cameras, rail.motion.joints_track_m[:, 0])])
+    assert np.all((px[:, 0] > 0) & (px[:, 0] < base.image_size[0]))
+    with pytest.raises(ValueError, match="rail_frac"):
+        CameraSetup(rail_frac=-0.2)
+    cfg, frac, name = rail_config(RAIL_SEEDS[4])
+    assert frac == 1.0 and cfg.camera.rail_frac == 1.0 and name.startswith(f"rail_{RAIL_SEEDS[4]}_f1_")

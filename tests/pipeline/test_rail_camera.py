@@ -1,0 +1,64 @@
+"""A camera on a rail: probreg assumes a static camera and cannot see the move in the lanes (they
+run along it), but the planted feet run backwards; the gait verdict says so and marks the speed.
+The same set-up with a static camera is left alone."""
+
+import json
+from dataclasses import replace
+
+import pytest
+
+from probreg.cli import main
+
+FAST_RUN = ["--walkers", "20", "--max-steps", "600", "--draws", "8", "--seed", "1", "--quiet"]
+RAIL_FRAC = 0.6
+
+
+@pytest.fixture(scope="module")
+def runs(tmp_path_factory):
+    from probreg.sim import config_from_preset, synthesize, write_clip
+
+    base = replace(config_from_preset("run", 23, image_size=(1280, 720)), n_frames=120)
+    root = tmp_path_factory.mktemp("rail")
+    out = {}
+    for label, frac in (("static", 0.0), ("rail", RAIL_FRAC)):
+        cfg = replace(base, camera=replace(base.camera, rail_frac=frac))
+        clip = write_clip(synthesize(cfg, seed=23, preset="run"), root / label, images=True, jobs=1)
+        res = root / f"{label}_out"
+        code = main(["run", str(clip), "--out", str(res)] + FAST_RUN)
+        true_speed = json.loads((clip / "groundtruth" / "athlete.json").read_text())["gait"]["speed_mps"]
+        out[label] = (code, json.loads((res / "run.json").read_text()), json.loads((res / "gait.json").read_text()),
+                      true_speed, clip, res)
+    return out
+
+
+def test_a_rail_camera_is_found_by_its_sliding_feet(runs):
+    code, run, gait, true_speed, *_ = runs["rail"]
+    slide = run["diagnostics"]["stance_slide"]
+    assert slide["backslide"] < -0.5 and slide["frames"] > 50
+    # what probreg sees is the runner's speed relative to the camera
+    assert slide["speed_mps"] == pytest.approx((1 - RAIL_FRAC) * true_speed, rel=0.25)
+    assert run["gait_verdict"] == "unreliable"
+    assert any(r.startswith("feet slide back") for r in run["gait_verdict_reasons"])
+    assert gait["speed_mps"]["status"] == "unreliable" and gait["step_length_m"]["status"] == "unreliable"
+
+
+def test_the_same_set_up_with_a_static_camera_is_not_flagged_by_it(runs):
+    code, run, gait, true_speed, *_ = runs["static"]
+    slide = run["diagnostics"]["stance_slide"]
+    assert slide["backslide"] > -0.5
+    assert not any(r.startswith("feet slide back") for r in run["gait_verdict_reasons"])
+    assert gait["speed_mps"]["status"] == "ok"
+    # the rail took 60 % of the runner's speed off what probreg saw; the static camera did not
+    assert slide["speed_mps"] > 2 * runs["rail"][1]["diagnostics"]["stance_slide"]["speed_mps"]
+
+
+def test_the_rail_benchmark_scores_a_result_against_the_truth(runs):
+    from probreg.bench.rails import score_rail
+
+    *_, true_speed, clip, res = runs["rail"]
+    s = score_rail(clip, res)
+    assert s["sliding"] and s["gait_verdict"] == "unreliable" and s["backslide"] < -0.5
+    assert s["speed_err_pct"] == pytest.approx(-100 * RAIL_FRAC, abs=25)  # the rail's share of the speed is lost
+    assert 0 < s["knee_deg"] < 15 and abs(s["stature_err_pct"]) < 30
+    static = score_rail(*runs["static"][-2:])
+    assert not static["sliding"] and static["backslide"] > -0.5
