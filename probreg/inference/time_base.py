@@ -51,6 +51,16 @@ the estimates were 0.84-3.93 ``g``, within 15 % of the truth except where the cl
 height was 10-20 cm off (a grazing and a steep view: 2.05, 3.76 and 3.93 ``g``); such errors
 inflate the bounce, never hide a replay.  There the ground track's speed was wrong too (0.97
 m/s for a runner at 4.5 m/s), so the speed is used only when no stride repeats.
+
+A pelvis height can also come out too flat: on a static control clip of the rail set
+(:mod:`probreg.sim.rails`, seed 9811, 25 fps, a far stand camera) the lifted pelvis bounced 7.5 mm
+(truth 3.5 cm), 0.25 ``g``, which read as a 2.2x replay at 172 steps/min, while a runner at 2.2x
+that cadence (387 steps/min) does not exist.  A bounce below :data:`MIN_BOUNCE_G`, at a cadence
+within a runner's (:data:`RUNNING_CADENCE_SPM`), whose slow-down would put the real cadence above
+a runner's is therefore not used, as a swing too large is not (with the cadence beyond a runner's
+too, the cues still contradict each other: ``unclear``).  This guard came after that run (it changes no clip of the replay
+set, whose replays' labelled cadences are below a runner's, nor any real-time clip there: their
+bounces are above 0.5 ``g``); ``docs/method.md`` says so.
 """
 
 from __future__ import annotations
@@ -203,6 +213,10 @@ def time_base_check(keypoints_px, fps, pelvis_z_m=None, stride_frames=None, spee
     ('slow', 3.9, 'slow motion about 3.9x (pelvis bounce 0.08 g, cadence 43 steps/min, speed 1.1 m/s at 50 fps)')
     >>> time_base_check(None, 200.0, z, stride_frames=140.0, speed_mps=4.4)["status"]
     'ok'
+    >>> flat = 0.95 + 0.005 * np.cos(2 * np.pi * t / 17.5)  # 0.16 g, but 171 steps/min: real cadence 470?
+    >>> tb = time_base_check(None, 50.0, flat, stride_frames=35.0)
+    >>> tb["status"], tb["bounce_g"]
+    ('ok', None)
     """
     fps = float(fps)
     sf = (stride_frames_any_rate(keypoints_px, fps, stride_frames) if keypoints_px is not None
@@ -214,6 +228,10 @@ def time_base_check(keypoints_px, fps, pelvis_z_m=None, stride_frames=None, spee
     bounce = _in_g(amp, sf / 2, fps) if amp <= MAX_BOUNCE_AMPLITUDE_M else float("nan")
     speed = float("nan") if speed_mps is None else float(speed_mps)
     lo, hi = RUNNING_CADENCE_SPM
+    # nor does one so weak, at a runner's cadence, that the slow-down it implies would put the real
+    # cadence above any runner's: a bounce the lifting flattened (a rail-set control: 0.25 g at 172)
+    if bounce < MIN_BOUNCE_G and lo <= cadence <= hi and cadence * np.sqrt(BOUNCE_REF_G / bounce) > hi:
+        bounce = float("nan")
     # the speed (the ground track, often poor where the pelvis is) only when no stride repeats
     slow = (bounce < MIN_BOUNCE_G) or (cadence < lo) or (np.isnan(cadence) and speed < MIN_RUNNING_SPEED_MPS)
     # or both moderately beyond a runner's: a 2x too fast jogger (4.6-5.5 g at 300-350 steps/min in

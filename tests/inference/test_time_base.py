@@ -154,3 +154,14 @@ def test_a_stream_that_repeats_its_frames_is_flagged():
     tb = time_base_check(None, 50.0, z, stride_frames=35.0, speed_mps=4.0,
                          raw_keypoints_px=np.concatenate([one[:10], kp[10:]]))
     assert tb["repeats_reason"] is None and tb["repeated_frames"] == 5
+
+
+def test_a_bounce_too_weak_for_a_runners_cadence_says_nothing():
+    """0.16 g would be a 2.8x replay, but the stride pattern's 171 steps/min times 2.8 is no runner's
+    cadence: the pelvis height came out flat (the lifting's), and the clip is taken as real time.
+    The same weak bounce at a jogger's labelled 85 steps/min is a replay."""
+    z = _bounce(250, 17.5, amp_m=0.005)
+    tb = time_base_check(None, 50.0, z, stride_frames=35.0)
+    assert tb["status"] == "ok" and tb["bounce_g"] is None and tb["bounce_amplitude_m"] == pytest.approx(0.005, rel=0.05)
+    slow = time_base_check(None, 50.0, _bounce(250, 35.0, amp_m=0.005), stride_frames=70.0)
+    assert slow["status"] == "slow" and slow["bounce_g"] == pytest.approx(0.04, abs=0.01)
