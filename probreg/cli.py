@@ -14,6 +14,7 @@ from __future__ import annotations
 
 import argparse
 import sys
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -62,16 +63,14 @@ def _cmd_synth(args):
     overrides = {}
     if args.style:
         overrides["style"] = args.style
-    if args.camera_height is not None or args.fov is not None or args.distance is not None:
-        from dataclasses import replace
-
-        base = config_from_preset(args.preset, args.seed).camera
-        cam_kw = {k: v for k, v in (("height_m", args.camera_height), ("distance_m", args.distance)) if v is not None}
-        if args.fov is not None:
-            if not 0 < args.fov < 180:
-                raise ValueError(f"field of view must lie in (0, 180) degrees, got {args.fov}")
-            cam_kw["fov_range_deg"] = (args.fov, args.fov)
-        overrides["camera"] = replace(base, **cam_kw)
+    cam_kw = {k: v for k, v in (("height_m", args.camera_height), ("distance_m", args.distance),
+                                ("rail_frac", args.rail)) if v is not None}
+    if args.fov is not None:
+        if not 0 < args.fov < 180:
+            raise ValueError(f"field of view must lie in (0, 180) degrees, got {args.fov}")
+        cam_kw["fov_range_deg"] = (args.fov, args.fov)
+    if cam_kw:
+        overrides["camera"] = replace(config_from_preset(args.preset, args.seed).camera, **cam_kw)
     cfg = config_from_preset(args.preset, args.seed, n_frames=args.frames, **overrides)
     clip = synthesize(cfg, seed=args.seed, preset=args.preset)
     path = write_clip(clip, args.out, images=not args.no_images, jobs=args.jobs, overwrite=args.overwrite)
@@ -453,6 +452,7 @@ def build_parser():
     s.add_argument("--camera-height", type=float, default=None, help="override camera height (m)")
     s.add_argument("--distance", type=float, default=None, help="override camera distance across the track (m)")
     s.add_argument("--fov", type=float, default=None, help="fix the horizontal field of view (deg)")
+    s.add_argument("--rail", type=float, default=None, help="camera on a rail at this share of the runner's speed")
     s.add_argument("--jobs", type=int, default=None, help="rendering processes (default: all cores)")
     s.add_argument("--overwrite", action="store_true",
                    help="use a non-empty --out that probreg did not write (moved aside, never deleted)")

@@ -53,14 +53,15 @@ inflate the bounce, never hide a replay.  There the ground track's speed was wro
 m/s for a runner at 4.5 m/s), so the speed is used only when no stride repeats.
 
 A pelvis height can also come out too flat: on a static control clip of the rail set
-(:mod:`probreg.sim.rails`, seed 9811, 25 fps, a far stand camera) the lifted pelvis bounced 7.5 mm
-(truth 3.5 cm), 0.25 ``g``, which read as a 2.2x replay at 172 steps/min, while a runner at 2.2x
-that cadence (387 steps/min) does not exist.  A bounce below :data:`MIN_BOUNCE_G`, at a cadence
-within a runner's (:data:`RUNNING_CADENCE_SPM`), whose slow-down would put the real cadence above
-a runner's is therefore not used, as a swing too large is not (with the cadence beyond a runner's
-too, the cues still contradict each other: ``unclear``).  This guard came after that run (it changes no clip of the replay
-set, whose replays' labelled cadences are below a runner's, nor any real-time clip there: their
-bounces are above 0.5 ``g``); ``docs/method.md`` says so.
+(:mod:`probreg.sim.rails`, seed 9811, 25 fps, a far stand camera) the lifted pelvis bounced 7.5
+mm (truth 3.5 cm), 0.25 ``g``, which read as a 2.2x replay at 172 steps/min, while a runner at
+2.2x that cadence (387 steps/min) does not exist. A bounce below :data:`MIN_BOUNCE_G`, at a
+cadence within a runner's (:data:`RUNNING_CADENCE_SPM`), whose slow-down would put the real
+cadence above a runner's is therefore not used, as a swing too large is not (with the cadence
+beyond a runner's too, the cues still contradict each other: ``unclear``). This guard came after
+that run (it changes no clip of the replay set, whose replays' labelled cadences are below a
+runner's, nor any real-time clip there: their bounces are above 0.5 ``g``); ``docs/method.md``
+says so.
 """
 
 from __future__ import annotations

@@ -345,7 +345,14 @@ def run_report(out_html, clip, result, joints_median, cameras, rendered=None):
             rep.paragraph(f"Lens: k1 {lens['median']:+.3f} ({lens['source']}).", cls="note")
     rep.heading("Gait")
     gait_reasons = getattr(result, "gait_verdict_reasons", ())
-    if gait_reasons:
+    if any(r.startswith("feet slide back") for r in gait_reasons):  # the along-track positions do not hold
+        rep.paragraph("Every gait number, the speed included, is unreliable: " + "; ".join(gait_reasons)
+                      + ". Planted feet stand still, and here they run backwards: the camera moved along the "
+                      "track (a rail or tracking camera; probreg assumes a static one), or the positions along "
+                      "the track do not hold together from frame to frame (probreg.inference.gait_check). Their "
+                      "bands do not cover this; the angles do not rest on the positions along the track.",
+                      cls="warning")
+    elif gait_reasons:
         rep.paragraph("The gait numbers that rest on the detected ground contacts are unreliable: "
                       + "; ".join(gait_reasons) + " (probreg.inference.gait_check). Their bands do not "
                       "cover this; the angles do not rest on the contacts' timing.", cls="warning")

@@ -270,9 +270,9 @@ def simulate_broadcast_cameras(setup: CameraSetup, motion: RunnerMotion, image_s
     """Per-frame cameras of a static broadcast camera following the runner.
 
     The camera centre is fixed (on a rail, ``setup.rail_frac > 0``, it moves along ``x`` at that
-    share of the runner's mean speed, through its static position at mid-clip); pan/tilt follow the pelvis with a first-order
-    lag, a random-walk jitter and a framing offset; zoom holds the athlete at
-    about ``athlete_height_px`` with a slow drift.
+    share of the runner's mean speed, through its static position at mid-clip); pan/tilt follow
+    the pelvis with a first-order lag, a random-walk jitter and a framing offset; zoom holds the
+    athlete at about ``athlete_height_px`` with a slow drift.
     """
     w, h = image_size
     side = 1.0 if setup.infield else -1.0

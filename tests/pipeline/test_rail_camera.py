@@ -25,6 +25,7 @@ def runs(tmp_path_factory):
         clip = write_clip(synthesize(cfg, seed=23, preset="run"), root / label, images=True, jobs=1)
         res = root / f"{label}_out"
         code = main(["run", str(clip), "--out", str(res)] + FAST_RUN)
+        out.setdefault("reports", {})[label] = (res / "report.html").read_text()
         true_speed = json.loads((clip / "groundtruth" / "athlete.json").read_text())["gait"]["speed_mps"]
         out[label] = (code, json.loads((res / "run.json").read_text()), json.loads((res / "gait.json").read_text()),
                       true_speed, clip, res)
@@ -40,6 +41,8 @@ def test_a_rail_camera_is_found_by_its_sliding_feet(runs):
     assert run["gait_verdict"] == "unreliable"
     assert any(r.startswith("feet slide back") for r in run["gait_verdict_reasons"])
     assert gait["speed_mps"]["status"] == "unreliable" and gait["step_length_m"]["status"] == "unreliable"
+    assert "Every gait number, the speed included, is unreliable" in runs["reports"]["rail"]
+    assert "the camera moved along the track" in runs["reports"]["rail"]
 
 
 def test_the_same_set_up_with_a_static_camera_is_not_flagged_by_it(runs):
@@ -48,6 +51,7 @@ def test_the_same_set_up_with_a_static_camera_is_not_flagged_by_it(runs):
     assert slide["backslide"] > -0.5
     assert not any(r.startswith("feet slide back") for r in run["gait_verdict_reasons"])
     assert gait["speed_mps"]["status"] == "ok"
+    assert "Every gait number" not in runs["reports"]["static"]
     # the rail took 60 % of the runner's speed off what probreg saw; the static camera did not
     assert slide["speed_mps"] > 2 * runs["rail"][1]["diagnostics"]["stance_slide"]["speed_mps"]
 

@@ -157,7 +157,13 @@ def test_cli_synth_no_images_and_errors(tmp_path, capsys):
     assert "unknown preset" in capsys.readouterr().err
     assert main(["synth", "--out", str(tmp_path / "bad"), "--fov", "200"]) == 2
     assert main(["synth", "--out", str(tmp_path / "bad"), "--camera-height", "-1"]) == 2
+    assert main(["synth", "--out", str(tmp_path / "bad"), "--rail", "-0.5"]) == 2
+    assert "rail_frac" in capsys.readouterr().err
     assert not (tmp_path / "bad").exists()
+    rail = tmp_path / "rail"  # a camera on a rail: its centre moves along the track
+    assert main(["synth", "--out", str(rail), "--seed", "3", "--frames", "12", "--no-images", "--rail", "0.5"]) == 0
+    C = np.array([c.C for c in load_groundtruth(rail).cameras])
+    assert C[-1, 0] - C[0, 0] > 0.5 and np.ptp(C[:, 1:], axis=0).max() == 0.0
     # a folder with foreign files is not clobbered
     foreign = tmp_path / "foreign"
     foreign.mkdir()
