@@ -5,9 +5,7 @@ rail at 0, 1/4, 1/2, 3/4 or all of the runner's speed; seeds fixed before the ch
 them) goes through the command line as a user runs it, ``probreg run CLIP --out OUT --seed 0``.
 probreg assumes a static camera; the check (:func:`probreg.inference.gait_check.stance_slide`)
 asks whether the planted feet stand still, and when they run backwards it makes the gait
-verdict ``unreliable`` (``feet slide back ...``) with every gait number, the speed included;
-beyond 1.5 times the runner's apparent speed the clip verdict gets ``camera moves along the
-track (...)`` too (added after this set's first run: its count here is not an independent one).
+verdict ``unreliable`` (``feet slide back ...``) with every gait number, the speed included.
 Each result is scored against the ground truth:
 
 * the feet-slide measure of ``run.json`` (``diagnostics.stance_slide.backslide``: the slower

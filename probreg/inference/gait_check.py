@@ -36,8 +36,7 @@ every other clip half a stride (the legs swapped) mismatches at least 8 times mo
     hold together: the camera moved along the track (a rail or tracking camera; probreg assumes
     a static one), or the per-frame pan is off (lanes nearly parallel in a long lens) and
     carries the runner back and forth.  Then the speed, the step length and the contacts are
-    wrong too, and every gait number is marked unreliable, the speed included; below -1.5 the
-    clip verdict gets ``camera moves along the track`` (:mod:`probreg.inference.verdict`).  (Designed on
+    wrong too, and every gait number is marked unreliable, the speed included.  (Designed on
     the tuning twins 7501-7520, static cameras: at most -0.51 on a 25 fps steep view (-1.18 on a
     clip whose scale was wrong); rails at a quarter of the runner's speed -0.17 and -0.31, at half
     -0.53 to -0.73, at three quarters -2.6 and -6.5 (seeds 7601-7608).  The judged rail set and

@@ -152,17 +152,6 @@ reason of its own, a short machine-readable string with the number that triggere
 ``repeated frames (n of m repeat the one before: ...)``
     the stream repeats its frames (25 fps content in a 50 fps stream, frozen frames):
     :func:`probreg.inference.time_base.repeated_frames`.
-``camera moves along the track (planted feet slide back at x times the pelvis speed)``
-    the slower ankle runs backwards at more than :attr:`VerdictThresholds.max_backslide` (1.5)
-    times the pelvis's apparent speed (:func:`probreg.inference.gait_check.stance_slide`): a
-    camera moving with the runner at more than 60 % of its speed (``f / (1 - f)`` is 1.5 at
-    ``f = 0.6``), a rail or tracking camera.  probreg assumes a static camera; the gait numbers
-    are flagged from -0.5 on, and beyond this the camera's height and the stature are pulled too:
-    on the rail clips of seeds 7601-7608 (not the judged rail set) at three quarters of the
-    runner's speed (-2.9 and -6.9) they were 9-14 % off, where at a half (-0.5 to -0.8) they held.
-    The static clips of the tuning twins stayed above -1.2 (one whose scale was wrong), those of
-    the validation and held-out sets above -1.0.  Added after the rail set's first judged run
-    (``reports/bench_rails.md`` and ``docs/method.md`` say what that run showed).
 """
 
 from __future__ import annotations
@@ -279,12 +268,6 @@ REASON_HELP = {
          "camera height is pulled between two cameras, and every angle may be far off"),
         "run one shot at a time (the default estimates the longest; --shot N picks shot N)",
     ),
-    "camera moves along the track": (
-        ("probreg assumes a static camera, and this one ran with the runner (a rail or tracking camera): "
-         "planted feet slide back in its view, so speed and step length are off, and the camera height "
-         "and the stature may be too"),
-        "use a static camera's view of the run; the angles are the least affected of the results",
-    ),
     "repeated frames": (
         ("the stream repeats its frames (e.g. 25 fps content in a 50 fps stream): the motion stops every "
          "other frame, which the noise model and the smoothing read as motion, and the bands are far too narrow"),
@@ -334,7 +317,6 @@ class VerdictThresholds:
     max_obliquity_deg: float = 35.0
     min_knee_peak_deg: float = 80.0
     max_exchanged_fraction: float = 1.0 / 3.0
-    max_backslide: float = 1.5
 
 
 def bone_length_cv(joints_track_m):
@@ -492,7 +474,7 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
                  log_height_prior_sd=None, side=None, bone_cv_pct=None, speed_mps=None,
                  stature_draws=None, stature_prior=None, branch=None, member_sensitivity=None,
                  lanes_agree=None, noise_rho=None, knee_band_deg=None, obliquity_deg=None, knee_peak_deg=None,
-                 left_right_exchanged=None, cuts=None, time_base=None, stance_slide=None,
+                 left_right_exchanged=None, cuts=None, time_base=None,
                  thresholds: VerdictThresholds = VerdictThresholds()):
     """The clip verdict and its reasons.
 
@@ -544,8 +526,6 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
         (``--shot all``; :mod:`probreg.lanes.shots`).
     time_base : dict, optional
         :func:`probreg.inference.time_base.time_base_check` (its ``reason`` when not real time).
-    stance_slide : dict, optional
-        :func:`probreg.inference.gait_check.stance_slide` (its ``backslide``).
 
     Returns
     -------
@@ -639,8 +619,5 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
     for key in ("reason", "repeats_reason"):
         if time_base and time_base.get(key):
             reasons.append(time_base[key])
-    back = (stance_slide or {}).get("backslide")
-    if back is not None and np.isfinite(back) and back < -t.max_backslide:
-        reasons.append(f"camera moves along the track (planted feet slide back at {-back:.1f} times the pelvis speed)")
     verdict = "uncalibrated" if uncal else ("unreliable" if reasons else "ok")
     return verdict, reasons
