@@ -13,7 +13,7 @@ from pathlib import Path
 
 import numpy as np
 
-__all__ = ["BENCHMARKS", "BenchReport", "run_benchmark", "md_table", "find_shared_data"]
+__all__ = ["BENCHMARKS", "BenchReport", "run_benchmark", "md_table", "find_shared_data", "verdict_text"]
 
 #: name -> "module:function"; each function takes (args namespace) and returns a BenchReport.
 BENCHMARKS = {
@@ -54,6 +54,15 @@ class BenchReport:
                 f"{platform.machine()} with {os.cpu_count()} cores, Python {platform.python_version()}, "
                 f"numpy {np.__version__}", ""]
         return "\n".join(head) + "\n" + "\n".join(self.sections)
+
+
+def verdict_text(verdict, reasons):
+    """A verdict with its reasons for a table cell.
+
+    >>> verdict_text("ok", []), verdict_text("unreliable", ["a", "b"])
+    ('ok', 'unreliable (a; b)')
+    """
+    return verdict + (f" ({'; '.join(reasons)})" if reasons else "")
 
 
 def md_table(header, rows, floatfmt="{:.2f}"):

@@ -27,7 +27,7 @@ import numpy as np
 
 from ..geometry import joint_angles
 from ..io.clip import load_groundtruth
-from .common import BenchReport, md_table
+from .common import BenchReport, md_table, verdict_text
 from .validation import _run_cli, judge_dirs, real_time_clips
 
 __all__ = ["run", "score_cut_result"]
@@ -144,8 +144,7 @@ def run(args):
             flagged_before += bool(before)
             rows.append([clip.name, meta["shots"], meta["cut"], ", ".join(map(str, s["cuts"])) or "none",
                          f"{s['frames'][0]}-{s['frames'][1] - 1}", s["knee_deg"], s["height_err_pct"],
-                         "yes" if s["height_in"] else "no", s["verdict"] + (f" ({'; '.join(s['reasons'])})"
-                                                                            if s["reasons"] else ""),
+                         "yes" if s["height_in"] else "no", verdict_text(s["verdict"], s["reasons"]),
                          a["knee_deg"], a["verdict"], "; ".join(before) or "none (ok)", res["shot_wall"]])
         n = len(clips)
         rep.add("## The cut set (20 clips, seeds fixed before tuning)\n\n" + md_table(

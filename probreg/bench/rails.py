@@ -30,7 +30,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.clip import load_groundtruth
-from .common import BenchReport, md_table
+from .common import BenchReport, md_table, verdict_text
 from .cuts import _run_kept, knee_errors
 from .validation import judge_dirs, real_time_clips
 
@@ -58,7 +58,8 @@ def score_rail(clip_dir: Path, out_dir: Path):
     true_h = float(cams[len(cams) // 2].C[2]) if cams else np.nan
     rel = lambda est, true: 100 * (float(est) / true - 1) if est is not None and true > 0 else np.nan  # noqa: E731
     reasons = run.get("gait_verdict_reasons", [])
-    return {"backslide": float(slide.get("backslide", np.nan) if slide.get("backslide") is not None else np.nan),
+    backslide = slide.get("backslide")
+    return {"backslide": float("nan") if backslide is None else float(backslide),
             "sliding": any(r.startswith("feet slide back") for r in reasons),
             "gait_verdict": run.get("gait_verdict", "n/a"), "gait_reasons": reasons,
             "speed_err_pct": rel(speed, _true_speed(gt.athlete)),
@@ -68,13 +69,9 @@ def score_rail(clip_dir: Path, out_dir: Path):
             "reasons": run.get("verdict_reasons", [])}
 
 
-def _verdict_text(verdict, reasons):
-    return verdict + (f" ({'; '.join(reasons)})" if reasons else "")
-
-
 def _row(name, s, *lead):
-    return [name, *lead, s["backslide"], _verdict_text(s["gait_verdict"], s["gait_reasons"]), s["speed_err_pct"],
-            s["knee_deg"], s["stature_err_pct"], s["height_err_pct"], _verdict_text(s["verdict"], s["reasons"])]
+    return [name, *lead, s["backslide"], verdict_text(s["gait_verdict"], s["gait_reasons"]), s["speed_err_pct"],
+            s["knee_deg"], s["stature_err_pct"], s["height_err_pct"], verdict_text(s["verdict"], s["reasons"])]
 
 
 HEADER = ["feet slide (backslide)", "gait verdict (reasons)", "speed err %", "knee err deg", "stature err %",

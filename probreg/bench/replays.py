@@ -28,7 +28,7 @@ from pathlib import Path
 import numpy as np
 
 from ..io.clip import load_groundtruth
-from .common import BenchReport, md_table
+from .common import BenchReport, md_table, verdict_text
 from .cuts import _run_kept, knee_errors
 from .validation import judge_dirs, real_time_clips
 
@@ -61,10 +61,6 @@ def _expected(factor):
 
 def _fmt(v, f="{:.2f}"):
     return "n/a" if v is None or not np.isfinite(v) else f.format(v)
-
-
-def _verdict_text(score):
-    return score["verdict"] + (f" ({'; '.join(score['reasons'])})" if score["reasons"] else "")
 
 
 def _replay_rows(clips, keep):
@@ -103,8 +99,9 @@ def _replay_rows(clips, keep):
         cad = lambda r: f"{_fmt(r['pattern_cadence_spm'], '{:.0f}')} / {_fmt(r['cadence_spm'], '{:.0f}')}"  # noqa: E731
         rows.append([clip.name, f"{factor:g}", f"{s['status']} (want {want})", _fmt(s["factor"]),
                      _fmt(s["bounce_g"]), s["knee_deg"], cad(s), _fmt(s["cadence_true_spm"], "{:.0f}"),
-                     _verdict_text(s), g["knee_deg"] if g else float("nan"), cad(g) if g else "n/a",
-                     _verdict_text(g) if g else "n/a"])
+                     verdict_text(s["verdict"], s["reasons"]), g["knee_deg"] if g else float("nan"),
+                     cad(g) if g else "n/a",
+                     verdict_text(g["verdict"], g["reasons"]) if g else "n/a"])
     return rows, counts
 
 

@@ -16,7 +16,7 @@ from .camera import (
     rotation_to_pan_tilt_roll,
     undistort_normalized,
 )
-from .rays import CameraArrays, camera_arrays, pixel_rays
+from .rays import CameraArrays, camera_arrays, camera_centres, pixel_rays
 from .skeleton import (
     ANGLE_NAMES,
     BONES,
@@ -37,5 +37,5 @@ __all__ = [
     "intersect_rays_plane", "intersect_rays_sphere", "TrackGeometry", "STANDARD_TRACK",
     "lane_line_y", "lane_center_y", "JOINT_NAMES", "JOINT_INDEX", "COCO_NAMES", "BONES",
     "SEGMENT_BONES", "ANGLE_NAMES", "coco_to_h36m", "segment_lengths", "joint_angles",
-    "bone_lengths", "CameraArrays", "camera_arrays", "pixel_rays",
+    "bone_lengths", "CameraArrays", "camera_arrays", "camera_centres", "pixel_rays",
 ]

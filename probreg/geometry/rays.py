@@ -8,7 +8,7 @@ import numpy as np
 
 from .camera import undistort_normalized
 
-__all__ = ["CameraArrays", "camera_arrays", "pixel_rays"]
+__all__ = ["CameraArrays", "camera_arrays", "camera_centres", "pixel_rays"]
 
 
 @dataclass(frozen=True)
@@ -47,6 +47,20 @@ def pixel_rays(cams: CameraArrays, pts_px):
     d_cam = np.concatenate([xy, np.ones(xy.shape[:-1] + (1,))], -1)
     d = np.einsum("fij,fki->fkj", cams.R, d_cam)  # R^T d_cam per frame
     return d / np.linalg.norm(d, axis=-1, keepdims=True)
+
+
+def camera_centres(cameras):
+    """Camera centres (F, 3) in the track frame, NaN rows for frames without a camera, from a list
+    of :class:`~probreg.geometry.camera.Camera` (or None), a :class:`CameraArrays` or an (F, 3) array.
+
+    >>> camera_centres([None, np.array([1.0, 2.0, 3.0])]).tolist()
+    [[nan, nan, nan], [1.0, 2.0, 3.0]]
+    """
+    if isinstance(cameras, CameraArrays):
+        return np.asarray(cameras.C, float)
+    if not isinstance(cameras, np.ndarray):
+        cameras = np.array([np.full(3, np.nan) if c is None else getattr(c, "C", c) for c in cameras], float)
+    return np.asarray(cameras, float).reshape(-1, 3)
 
 
 def _as_list(cams: CameraArrays):

@@ -136,7 +136,8 @@ def stance_slide(cameras, joints_track_m, fps):
     planted foot stands still, ``-f / (1 - f)`` for a camera moving at ``f`` of the runner's
     speed.  NaN (and ``frames`` below 10) when too few frames can be read.
 
-    ``cameras``: per frame a :class:`probreg.geometry.Camera` or None, or (F, 3) centres;
+    ``cameras``: per frame a :class:`probreg.geometry.Camera` or None, or (F, 3) centres
+    (:func:`probreg.geometry.camera_centres`);
     ``joints_track_m``: (F, 17, 3).
 
     >>> fps, t = 50.0, np.arange(100) / 50.0
@@ -153,11 +154,9 @@ def stance_slide(cameras, joints_track_m, fps):
     >>> round(stance_slide(cams, joints(2.5), fps)["backslide"], 2)  # on a rail at half the speed
     -1.0
     """
-    from ..geometry import JOINT_INDEX
+    from ..geometry import JOINT_INDEX, camera_centres
 
-    if not isinstance(cameras, np.ndarray):
-        cameras = np.array([np.full(3, np.nan) if c is None else getattr(c, "C", c) for c in cameras], float)
-    C = np.asarray(cameras, float).reshape(-1, 3)[:, :2]
+    C = camera_centres(cameras)[:, :2]
     J = np.asarray(joints_track_m, float)
     nan = {"backslide": float("nan"), "speed_mps": float("nan"), "frames": 0}
     pelvis = J[:, JOINT_INDEX["pelvis"], :2]
@@ -191,8 +190,8 @@ def stance_slide(cameras, joints_track_m, fps):
 
 def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE, slide=None):
     """The gait verdict: ``(gait, status, reasons)``, ``gait`` a copy of the summary
-    ({name: {"median", "lo", "hi", "unit"}}) whose contact-based numbers carry
-    ``"status"`` (``"ok"`` or ``"unreliable"``; ``speed_mps`` is always ``"ok"``).
+    ({name: {"median", "lo", "hi", "unit"}}) whose numbers carry ``"status"`` (``"ok"`` or
+    ``"unreliable"``: the contact-based ones with any reason; ``speed_mps`` only with feet that slide).
 
     ``stride_frames`` is the clip's stride period from the 2-D pattern (frames; NaN or None
     when the clip shows no repeating strides: then the cadence is not cross-checked).

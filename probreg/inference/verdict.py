@@ -161,7 +161,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..filtering.basic import NOISE_RHO_MAX
-from ..geometry import JOINT_INDEX
+from ..geometry import JOINT_INDEX, camera_centres
 
 __all__ = ["VerdictThresholds", "clip_verdict", "bone_length_cv", "knee_band_width", "knee_flexion_peak",
            "posterior_modes",
@@ -367,9 +367,7 @@ def view_obliquity(cameras, joints_track_m):
     >>> round(view_obliquity(np.tile([5.0, -20.0, 21.0], (11, 1)), joints), 1)  # from above
     45.3
     """
-    if not isinstance(cameras, np.ndarray):
-        cameras = np.array([np.full(3, np.nan) if c is None else getattr(c, "C", c) for c in cameras], float)
-    C = np.asarray(cameras, float).reshape(-1, 3)
+    C = camera_centres(cameras)
     pelvis = np.asarray(joints_track_m, float)[:, JOINT_INDEX["pelvis"]]
     ok = np.all(np.isfinite(C), 1) & np.all(np.isfinite(pelvis), 1)
     if not ok.any():
