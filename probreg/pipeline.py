@@ -39,7 +39,7 @@ from .filtering import detection_status
 from .geometry import JOINT_INDEX, JOINT_NAMES
 from .geometry.rays import _as_list
 from .inference import (STATIC_INTERVAL_SCALE, ModelPriors, angle_bands, bootstrap_noise_ratio, gait_cycle_bands,
-                        gait_check, gait_intervals, pattern_cadence_spm, stance_slide, static_interval)
+                        gait_check, gait_intervals, pattern_cadence_spm, speed_scatter, stance_slide, static_interval)
 from .inference.heights import HEIGHT_SYSTEMATIC_SD
 from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationError
 from .inference.sampling import SamplerSettings
@@ -429,9 +429,10 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         joints_med = np.nanmedian(prop["joints_point"], 0)
         cam_list = _as_list(model.cameras_at(height["median"]))
         diag["stance_slide"] = slide = stance_slide(cam_list, joints_med, clip.fps)  # do planted feet stand?
-        gait_s, gait_status, gait_reasons = gait_check(gait_s, model.stride_frames(), clip.fps, slide=slide)
-        time_base = {**time_base_check(model.kp, clip.fps, joints_med[:, JOINT_INDEX["pelvis"], 2],
-                                       model.stride_frames(), gait_s.get("speed_mps", {}).get("median"), model.raw),
+        diag["speed_scatter"] = spread = speed_scatter(joints_med, clip.fps, stride := model.stride_frames())
+        gait_s, gait_status, gait_reasons = gait_check(gait_s, stride, clip.fps, slide=slide, scatter=spread)
+        time_base = {**time_base_check(model.kp, clip.fps, joints_med[:, JOINT_INDEX["pelvis"], 2], stride,
+                                       gait_s.get("speed_mps", {}).get("median"), model.raw),
                      "slow_motion": options.slow_motion}
         if time_base["reason"]:  # every time-based gait number is off by the factor
             gait_status, gait_reasons = "unreliable", [*gait_reasons, time_base["reason"]]

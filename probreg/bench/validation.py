@@ -44,7 +44,7 @@ from ..io.results import read_angles_csv
 from .common import BenchReport, find_shared_data, md_table
 from .posterior import score_result, true_gait
 
-__all__ = ["run", "score_validation", "peer_knee_errors"]
+__all__ = ["run", "score_validation", "peer_knee_errors", "speed_line"]
 
 
 def peer_knee_errors(readme: Path):
@@ -96,6 +96,13 @@ def score_validation(clip_dir: Path, out_dir: Path):
     run = json.loads((out_dir / "run.json").read_text())
     pattern = run.get("diagnostics", {}).get("cadence_stride_pattern_spm")
     truth = true_gait(clip_dir)["cadence_spm"]
+    sp = s["gait"].get("speed_mps")
+    if sp is not None:  # the interval of the draws alone: gait_check widened it by the speed's scatter
+        se = float(run.get("diagnostics", {}).get("speed_scatter", {}).get("se_mps") or 0.0)
+        extra = 1.6448536269514722 * se if np.isfinite(se) else 0.0
+        lo, hi = (sp["median"] - np.sqrt(max(sp["median"] - sp["lo"], extra) ** 2 - extra**2),
+                  sp["median"] + np.sqrt(max(sp["hi"] - sp["median"], extra) ** 2 - extra**2))
+        sp["inside_draws"] = bool(lo <= sp["truth"] <= hi)
     s.update({
         "pattern_cadence_pct": 100 * (pattern / truth - 1) if pattern is not None and truth else float("nan"),
         "position_pct": float(np.mean(pos)) if pos else float("nan"),
@@ -148,6 +155,28 @@ def pattern_cadence_line(scores):
     return ("Cadence of the stride pattern (`diagnostics.cadence_stride_pattern_spm`, the gait check's "
             f"reference): within 2 % of the truth on {int(np.sum(e[ok] <= 2))} of {len(e)} clips; {stats} "
             f"({int(ok.sum())} clips with a value).")
+
+
+def speed_line(scores):
+    """One sentence on the running speed (``gait.json``) against the truth: errors, and how many 90 %
+    intervals hold it, with and without the stride-to-stride scatter's standard error
+    (:func:`probreg.inference.gait_check.speed_scatter`, ``diagnostics.speed_scatter``).
+
+    >>> s = {"a": {"gait": {"speed_mps": {"rel_pct": -40.0, "inside": True, "inside_draws": False}}},
+    ...      "b": {"gait": {"speed_mps": {"rel_pct": 4.0, "inside": True, "inside_draws": True}}}, "c": {}}
+    >>> line = speed_line(s)
+    >>> line[line.index("mean"):line.index(";")]
+    'mean abs. error 22.0 %, largest 40.0 %'
+    >>> line[line.index("hold"):]
+    'hold the truth on 2 of 2 clips (1 of 2 without the scatter).'
+    """
+    sp = [v["gait"]["speed_mps"] for v in scores.values() if "speed_mps" in v.get("gait", {})]
+    if not sp:
+        return "Running speed: no clip with a speed and its truth."
+    e = np.abs([x["rel_pct"] for x in sp])
+    return (f"Running speed (`gait.json` `speed_mps`) against the truth: mean abs. error {np.mean(e):.1f} %, "
+            f"largest {np.max(e):.1f} %; 90 % intervals hold the truth on {sum(x['inside'] for x in sp)} of {len(sp)} "
+            f"clips ({sum(x.get('inside_draws', x['inside']) for x in sp)} of {len(sp)} without the scatter).")
 
 
 def _run_cli(clip: Path, out: Path, extra=()):
@@ -405,3 +434,4 @@ def _run_sets(rep, sets, only, keep=None):
                        if s.get("gait_verdict") == "unreliable"]
             rep.add("Gait numbers flagged: " + ("; ".join(flagged) or "none") + ".\n")
             rep.add(pattern_cadence_line(scores) + "\n")
+            rep.add(speed_line(scores) + "\n")

@@ -28,7 +28,7 @@ from .model import (
 )
 from .sampling import MOVES, SamplerSettings
 from .priors import SEGMENT_PROPORTIONS, LogNormalPrior, ModelPriors, NormalPrior, Prior
-from .gait_check import gait_check, pattern_cadence_spm, stance_slide
+from .gait_check import gait_check, pattern_cadence_spm, speed_scatter, stance_slide
 from .verdict import VerdictThresholds, bone_length_cv, clip_verdict, knee_band_width, posterior_modes
 
 __all__ = [
@@ -37,5 +37,5 @@ __all__ = [
     "STANCE_WINDOW", "stance_window", "BAND_SCALE", "angle_curvature", "gait_intervals",
     "GAIT_BAND_SCALE", "NONNEGATIVE_GAIT_SUFFIXES", "ClipModel", "SamplerSettings", "MOVES", "PARAM_NAMES",
     "STILLNESS_SYS_SD", "BAND_CURVATURE_S2", "GAIT_CYCLE_ANGLES", "gait_cycle_bands",
-    "STATIC_INTERVAL_SCALE", "static_interval", "gait_check", "pattern_cadence_spm", "stance_slide",
+    "STATIC_INTERVAL_SCALE", "static_interval", "gait_check", "pattern_cadence_spm", "speed_scatter", "stance_slide",
 ]

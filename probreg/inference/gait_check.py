@@ -52,7 +52,7 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["CADENCE_TOLERANCE", "CONTACT_NUMBERS", "RUNNING_CADENCE_SPM", "HALF_LAG_RATIO", "MAX_STANCE_BACKSLIDE",
-           "gait_check", "pattern_cadence_spm", "pattern_stride_frames", "stance_slide"]
+           "gait_check", "pattern_cadence_spm", "pattern_stride_frames", "speed_scatter", "stance_slide"]
 
 #: steps per minute a runner makes in real time: a slow jog (~140) to the fastest sprinters
 #: (~5 steps/s), with margins; below it the motion is slowed (or it is a walk, which probreg's
@@ -188,7 +188,62 @@ def stance_slide(cameras, joints_track_m, fps):
     return {"backslide": float(np.percentile(v, 20) / speed), "speed_mps": speed, "frames": int(len(v))}
 
 
-def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE, slide=None):
+def speed_scatter(joints_track_m, fps, stride_frames):
+    """How much the pelvis's along-track speed changes from one stride to the next, and what that
+    leaves of the clip's mean speed: ``{"se_mps", "sd_mps", "windows", "window_frames"}``.
+
+    A runner's speed averaged over a whole stride changes little within a clip (within a stride
+    it rises and falls with every step; over one stride that cancels).  The along-track positions
+    come from each frame's camera pan, and where the lanes fix the pan poorly (nearly parallel
+    lines in a long lens) its error carries the runner back and forth by tens of centimetres, in
+    stretches of several frames that no keypoint bootstrap sees.  So the pelvis's speed over every
+    window of one stride (``stride_frames``, the 2-D pattern's period, rounded) along the clip's
+    direction of travel is read, ``sd_mps`` is their spread and ``se_mps = sd_mps / sqrt(n)`` the
+    standard error of the clip's mean speed, with ``n`` the number of strides the clip spans (at
+    least 1: overlapping windows are not independent).  NaN (``windows`` below 3) without a stride
+    period or with too few frames.
+
+    >>> fps = 50.0; t = np.arange(200) / fps
+    >>> J = np.zeros((200, 17, 3)); J[:, 0, 0] = 6.0 * t  # the pelvis at 6 m/s
+    >>> round(speed_scatter(J, fps, 34.0)["se_mps"], 6)
+    0.0
+    >>> J[:, 0, 0] += 0.3 * np.sign(np.sin(2 * np.pi * t / 0.5))  # a pan error of +-0.3 m over 0.25 s stretches
+    >>> out = speed_scatter(J, fps, 34.0)
+    >>> out["window_frames"], out["windows"], bool(0.1 < out["se_mps"] < 0.5)
+    (34, 166, True)
+    """
+    from ..geometry import JOINT_INDEX
+
+    nan = {"se_mps": float("nan"), "sd_mps": float("nan"), "windows": 0, "window_frames": 0}
+    sf = float("nan") if stride_frames is None else float(stride_frames)
+    if not np.isfinite(sf) or sf < 2:
+        return nan
+    p = np.asarray(joints_track_m, float)[:, JOINT_INDEX["pelvis"], :2]
+    ok = np.all(np.isfinite(p), 1)
+    idx = np.flatnonzero(ok)
+    w = int(round(sf))
+    if len(idx) < 2 or idx[-1] - idx[0] <= w:
+        return {**nan, "window_frames": w}
+    travel = p[idx[-1]] - p[idx[0]]
+    dist = float(np.hypot(*travel))
+    if dist < 1e-6:
+        return {**nan, "window_frames": w}
+    u = travel / dist
+    start = np.arange(idx[0], idx[-1] - w + 1)
+    start = start[ok[start] & ok[start + w]]
+    v = (p[start + w] - p[start]) @ u * fps / w
+    if len(v) < 3:
+        return {**nan, "windows": int(len(v)), "window_frames": w}
+    sd = float(np.std(v, ddof=1))
+    n = max(1.0, (idx[-1] - idx[0]) / w)
+    return {"se_mps": sd / float(np.sqrt(n)), "sd_mps": sd, "windows": int(len(v)), "window_frames": w}
+
+
+#: the two-sided 90 % point of a normal (the gait intervals are 90 % intervals)
+_Z90 = 1.6448536269514722
+
+
+def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE, slide=None, scatter=None):
     """The gait verdict: ``(gait, status, reasons)``, ``gait`` a copy of the summary
     ({name: {"median", "lo", "hi", "unit"}}) whose numbers carry ``"status"`` (``"ok"`` or
     ``"unreliable"``: the contact-based ones with any reason; ``speed_mps`` only with feet that slide).
@@ -196,7 +251,9 @@ def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE, slide=None
     ``stride_frames`` is the clip's stride period from the 2-D pattern (frames; NaN or None
     when the clip shows no repeating strides: then the cadence is not cross-checked).
     ``slide`` is :func:`stance_slide`'s result: feet sliding back make every number unreliable,
-    the speed too.
+    the speed too.  ``scatter`` is :func:`speed_scatter`'s result: the speed's 90 % interval is
+    widened by its standard error (each side ``sqrt(side**2 + (1.645 se)**2)``; the posterior's
+    draws share every frame's pan, so their interval leaves that error out).
 
     >>> g = {"cadence_spm": {"median": 180.0}, "contact_time_s": {"median": 0.15}, "speed_mps": {"median": 6.0}}
     >>> gait_check(g, 33.3, 50.0)[1:]
@@ -211,6 +268,10 @@ def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE, slide=None
     (['feet slide back (stance ankles at -0.90 times the pelvis speed)'], 'unreliable')
     >>> gait_check({"cadence_spm": {"median": 1000.0}}, None, 200.0)[2]  # no stride pattern to compare with
     ["cadence 1000 steps/min from the contacts, outside a runner's (120-330)"]
+    >>> g["speed_mps"].update(lo=5.7, hi=6.4)
+    >>> sp = gait_check(g, 33.3, 50.0, scatter={"se_mps": 0.4})[0]["speed_mps"]
+    >>> round(sp["lo"], 2), round(sp["hi"], 2)
+    (5.28, 6.77)
     """
     reasons = []
     cadence = _median(gait, "cadence_spm")
@@ -232,6 +293,13 @@ def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE, slide=None
         reasons.append(f"feet slide back (stance ankles at {backslide:.2f} times the pelvis speed)")
     status = "unreliable" if reasons else "ok"
     out = {k: {**v, "status": status if k in CONTACT_NUMBERS or sliding else "ok"} for k, v in gait.items()}
+    se = float("nan") if not scatter else float(scatter.get("se_mps", float("nan")))
+    sp = out.get("speed_mps")
+    finite = sp is not None and all(np.isfinite(sp.get(k, np.nan)) for k in ("median", "lo", "hi"))
+    if finite and np.isfinite(se) and se > 0:
+        m, extra = float(sp["median"]), _Z90 * se
+        sp["lo"] = max(0.0, m - float(np.hypot(m - sp["lo"], extra)))
+        sp["hi"] = m + float(np.hypot(sp["hi"] - m, extra))
     return out, status, reasons
 
 
