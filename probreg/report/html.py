@@ -359,6 +359,12 @@ def run_report(out_html, clip, result, joints_median, cameras, rendered=None):
     rep.table(["quantity", "median", "5 %", "95 %", "unit", "status"],
               [[k, v["median"], v["lo"], v["hi"], GAIT_FIELDS.get(k, ""), v.get("status", "")]
                for k, v in result.gait.items()])
+    spread = (getattr(result, "diagnostics", None) or {}).get("speed_scatter") or {}
+    if np.isfinite(spread.get("se_mps", np.nan)) and spread["se_mps"] > 0:
+        rep.paragraph(f"The speed's interval includes the camera pan's error: the runner's speed over one stride "
+                      f"({spread['window_frames']} frames) scatters by {spread['sd_mps']:.2f} m/s along the clip, a "
+                      f"standard error of {spread['se_mps']:.2f} m/s for its mean (run.json "
+                      "diagnostics.speed_scatter).", cls="note")
     if clip.frame_paths:
         mid = len(clip.frame_paths) // 2
         img = read_frame(clip, mid)

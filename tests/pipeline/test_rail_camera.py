@@ -54,6 +54,14 @@ def test_the_same_set_up_with_a_static_camera_is_not_flagged_by_it(runs):
     assert "Every gait number" not in runs["reports"]["static"]
     # the rail took 60 % of the runner's speed off what probreg saw; the static camera did not
     assert slide["speed_mps"] > 2 * runs["rail"][1]["diagnostics"]["stance_slide"]["speed_mps"]
+    # a static camera whose lanes fix the pan: the speed over one stride scatters little, and the
+    # speed's interval holds that scatter's standard error (probreg.inference.gait_check.speed_scatter)
+    spread = run["diagnostics"]["speed_scatter"]
+    assert spread["window_frames"] > 10 and spread["windows"] > 30
+    assert 0 < spread["se_mps"] < 0.1 * gait["speed_mps"]["median"]
+    sp = gait["speed_mps"]
+    assert sp["hi"] - sp["median"] >= 1.64 * spread["se_mps"] and sp["median"] - sp["lo"] >= 1.64 * spread["se_mps"]
+    assert f"a standard error of {spread['se_mps']:.2f} m/s for its mean" in runs["reports"]["static"]
 
 
 def test_the_rail_benchmark_scores_a_result_against_the_truth(runs):
