@@ -199,6 +199,7 @@ def _parse_dist(text):
 def _cmd_calibrate(args):
     from .calibration.registration import DEFAULT_HEIGHT_M, camera_json, register_clip
     from .calibration.side import requested_side
+    from .inference.parallel import fork_call
     from .io.clip import atomic_output_dir, load_clip, write_json
     from .io.frames import has_frames
 
@@ -209,7 +210,7 @@ def _cmd_calibrate(args):
     height = args.height_m if args.height_m is not None else DEFAULT_HEIGHT_M
     if not (height > 0):
         raise CliError(f"--height-m must be positive, got {height}")
-    reg = register_clip(clip, smooth=not args.no_smooth, shot=args.shot)
+    reg = register_clip(clip, smooth=not args.no_smooth, shot=args.shot, background=fork_call)
     if reg.shots.split:
         print(f"warning: {reg.shots.note()}", file=sys.stderr)
     given = requested_side(args.camera_side, clip.meta, clip.path / "clip.json")
@@ -353,8 +354,7 @@ def _cmd_opensim(args):
 def _cmd_batch(args):
     from .batch import DEFAULTS, run_batch
 
-    # every option of an entry that the command line takes is the entries' default (none dropped)
-    base = {k: getattr(args, k) for k in DEFAULTS if hasattr(args, k)}
+    base = {k: getattr(args, k) for k in DEFAULTS if hasattr(args, k)}  # entries default to every option given
     base["model"] = str(args.model.resolve()) if args.model else None
     if args.workers is not None and args.workers < 1:
         raise CliError("--workers must be at least 1")
