@@ -222,11 +222,11 @@ def _drop_mixed(cands, frac, reach=20.0):
     lines = np.array([c[0] for c in cands])
     keep = []
     for k, (line, pts, _) in enumerate(cands):
-        rms = _sagitta(pts, line, with_residual=True)[1]
         mid = pts.mean(0)
         others = np.delete(lines, k, axis=0)
         gap = float(np.min(np.abs(others[:, :2] @ mid + others[:, 2])))
-        keep.append(gap >= reach or rms <= frac * gap)
+        # the scatter only where a neighbour is near enough to be mixed in
+        keep.append(gap >= reach or _sagitta(pts, line, with_residual=True)[1] <= frac * gap)
     return [c for c, ok in zip(cands, keep) if ok]
 
 
