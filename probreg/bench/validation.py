@@ -44,7 +44,7 @@ from ..io.results import read_angles_csv
 from .common import BenchReport, find_shared_data, md_table
 from .posterior import score_result, true_gait
 
-__all__ = ["run", "score_validation", "peer_knee_errors", "speed_line"]
+__all__ = ["run", "score_validation", "peer_knee_errors", "speed_line", "gait_coverage_table", "GAIT_NUMBERS"]
 
 
 def peer_knee_errors(readme: Path):
@@ -177,6 +177,32 @@ def speed_line(scores):
     return (f"Running speed (`gait.json` `speed_mps`) against the truth: mean abs. error {np.mean(e):.1f} %, "
             f"largest {np.max(e):.1f} %; 90 % intervals hold the truth on {sum(x['inside'] for x in sp)} of {len(sp)} "
             f"clips ({sum(x.get('inside_draws', x['inside']) for x in sp)} of {len(sp)} without the scatter).")
+
+
+#: the numbers of ``gait.json`` whose intervals :func:`gait_coverage_table` scores
+GAIT_NUMBERS = ("cadence_spm", "step_length_m", "speed_mps", "contact_time_s", "flight_time_s",
+                "knee_flexion_touchdown_deg", "peak_knee_flexion_swing_deg")
+
+
+def gait_coverage_table(scores):
+    """Rows ``[gait number, intervals holding the truth where the gait verdict is ok, ... where it is
+    unreliable, all]`` for every number of ``gait.json`` (:data:`GAIT_NUMBERS`) with a truth.
+
+    >>> s = {"a": {"gait_verdict": "ok", "gait": {"cadence_spm": {"inside": True}}},
+    ...      "b": {"gait_verdict": "unreliable", "gait": {"cadence_spm": {"inside": False}}}}
+    >>> gait_coverage_table(s)
+    [['cadence_spm', '1 of 1', '0 of 1', '1 of 2 (50 %)']]
+    """
+    rows = []
+    for name in GAIT_NUMBERS:
+        by = {v: [s["gait"][name]["inside"] for s in scores.values()
+                  if s.get("gait_verdict") == v and name in s.get("gait", {})] for v in ("ok", "unreliable")}
+        every = by["ok"] + by["unreliable"]
+        if every:
+            ok, bad = by["ok"], by["unreliable"]
+            rows.append([name, f"{sum(ok)} of {len(ok)}", f"{sum(bad)} of {len(bad)}",
+                         f"{sum(every)} of {len(every)} ({100 * sum(every) / len(every):.0f} %)"])
+    return rows
 
 
 def _run_cli(clip: Path, out: Path, extra=()):
@@ -435,3 +461,7 @@ def _run_sets(rep, sets, only, keep=None):
             rep.add("Gait numbers flagged: " + ("; ".join(flagged) or "none") + ".\n")
             rep.add(pattern_cadence_line(scores) + "\n")
             rep.add(speed_line(scores) + "\n")
+            rep.add("Every gait number's 90 % interval against the truth (the true contacts, pelvis speed and "
+                    "knee angles; `probreg.bench.posterior.true_gait`), by gait verdict; no target in the issues:\n")
+            rep.add(md_table(["gait number", "holding the truth, gait verdict ok", "gait verdict unreliable", "all"],
+                             gait_coverage_table(scores)))
