@@ -40,6 +40,7 @@ import numpy as np
 
 from ..geometry import JOINT_INDEX, SEGMENT_BONES, joint_angles
 from ..io.clip import load_groundtruth, read_cameras_json
+from ..inference.gait_check import Z90
 from ..io.results import read_angles_csv
 from .common import BenchReport, find_shared_data, md_table
 from .posterior import score_result, true_gait
@@ -99,7 +100,7 @@ def score_validation(clip_dir: Path, out_dir: Path):
     sp = s["gait"].get("speed_mps")
     if sp is not None:  # the interval of the draws alone: gait_check widened it by the speed's scatter
         se = float(run.get("diagnostics", {}).get("speed_scatter", {}).get("se_mps") or 0.0)
-        extra = 1.6448536269514722 * se if np.isfinite(se) else 0.0
+        extra = Z90 * se if np.isfinite(se) else 0.0
         lo, hi = (sp["median"] - np.sqrt(max(sp["median"] - sp["lo"], extra) ** 2 - extra**2),
                   sp["median"] + np.sqrt(max(sp["hi"] - sp["median"], extra) ** 2 - extra**2))
         sp["inside_draws"] = bool(lo <= sp["truth"] <= hi)

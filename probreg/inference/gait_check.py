@@ -52,7 +52,8 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["CADENCE_TOLERANCE", "CONTACT_NUMBERS", "RUNNING_CADENCE_SPM", "HALF_LAG_RATIO", "MAX_STANCE_BACKSLIDE",
-           "gait_check", "pattern_cadence_spm", "pattern_stride_frames", "speed_scatter", "stance_slide"]
+           "Z90", "gait_check", "pattern_cadence_spm", "pattern_stride_frames", "speed_scatter",
+           "stance_slide"]
 
 #: steps per minute a runner makes in real time: a slow jog (~140) to the fastest sprinters
 #: (~5 steps/s), with margins; below it the motion is slowed (or it is a walk, which probreg's
@@ -159,17 +160,13 @@ def stance_slide(cameras, joints_track_m, fps):
     C = camera_centres(cameras)[:, :2]
     J = np.asarray(joints_track_m, float)
     nan = {"backslide": float("nan"), "speed_mps": float("nan"), "frames": 0}
-    pelvis = J[:, JOINT_INDEX["pelvis"], :2]
-    idx = np.flatnonzero(np.all(np.isfinite(pelvis), 1))
+    idx, dist, u = _travel(J[:, JOINT_INDEX["pelvis"], :2])
     h = max(1, int(round(SLIDE_HALF_WINDOW_S * fps)))
     if len(idx) < 2 or len(J) <= 2 * h or len(C) != len(J):
         return nan
-    travel = pelvis[idx[-1]] - pelvis[idx[0]]
-    dist = float(np.hypot(*travel))
     speed = dist * fps / (idx[-1] - idx[0])
-    if dist < 1e-6:
+    if u is None:
         return {**nan, "speed_mps": speed}
-    u = travel / dist
     with np.errstate(invalid="ignore", divide="ignore"):
         along = []
         for name in ("l_ankle", "r_ankle"):
@@ -186,6 +183,17 @@ def stance_slide(cameras, joints_track_m, fps):
     if len(v) < 10:
         return {**nan, "speed_mps": speed, "frames": int(len(v))}
     return {"backslide": float(np.percentile(v, 20) / speed), "speed_mps": speed, "frames": int(len(v))}
+
+
+def _travel(pelvis):
+    """The frames with a pelvis (``idx``), the distance between the first and the last of them and
+    the unit direction of that travel (None when there are fewer than two or they coincide)."""
+    idx = np.flatnonzero(np.all(np.isfinite(pelvis), 1))
+    if len(idx) < 2:
+        return idx, float("nan"), None
+    travel = pelvis[idx[-1]] - pelvis[idx[0]]
+    dist = float(np.hypot(*travel))
+    return idx, dist, (travel / dist if dist >= 1e-6 else None)
 
 
 def speed_scatter(joints_track_m, fps, stride_frames):
@@ -220,15 +228,10 @@ def speed_scatter(joints_track_m, fps, stride_frames):
         return nan
     p = np.asarray(joints_track_m, float)[:, JOINT_INDEX["pelvis"], :2]
     ok = np.all(np.isfinite(p), 1)
-    idx = np.flatnonzero(ok)
+    idx, _, u = _travel(p)
     w = int(round(sf))
-    if len(idx) < 2 or idx[-1] - idx[0] <= w:
+    if len(idx) < 2 or idx[-1] - idx[0] <= w or u is None:
         return {**nan, "window_frames": w}
-    travel = p[idx[-1]] - p[idx[0]]
-    dist = float(np.hypot(*travel))
-    if dist < 1e-6:
-        return {**nan, "window_frames": w}
-    u = travel / dist
     start = np.arange(idx[0], idx[-1] - w + 1)
     start = start[ok[start] & ok[start + w]]
     v = (p[start + w] - p[start]) @ u * fps / w
@@ -240,7 +243,7 @@ def speed_scatter(joints_track_m, fps, stride_frames):
 
 
 #: the two-sided 90 % point of a normal (the gait intervals are 90 % intervals)
-_Z90 = 1.6448536269514722
+Z90 = 1.6448536269514722
 
 
 def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE, slide=None, scatter=None):
@@ -297,7 +300,7 @@ def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE, slide=None
     sp = out.get("speed_mps")
     finite = sp is not None and all(np.isfinite(sp.get(k, np.nan)) for k in ("median", "lo", "hi"))
     if finite and np.isfinite(se) and se > 0:
-        m, extra = float(sp["median"]), _Z90 * se
+        m, extra = float(sp["median"]), Z90 * se
         sp["lo"] = max(0.0, m - float(np.hypot(m - sp["lo"], extra)))
         sp["hi"] = m + float(np.hypot(sp["hi"] - m, extra))
     return out, status, reasons
