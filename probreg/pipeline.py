@@ -40,7 +40,7 @@ from .geometry import JOINT_INDEX, JOINT_NAMES
 from .geometry.rays import _as_list
 from .inference import (STATIC_INTERVAL_SCALE, ModelPriors, angle_bands, bootstrap_noise_ratio, gait_cycle_bands,
                         gait_check, gait_intervals, pattern_cadence_spm, speed_scatter, stance_slide, static_interval)
-from .inference.heights import HEIGHT_SYSTEMATIC_SD
+from .inference.heights import HEIGHT_SYSTEMATIC_SD, height_terms_note
 from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationError
 from .inference.sampling import SamplerSettings
 from .inference.evidence import BRANCHES, BranchChoice, laplace_log_evidence
@@ -81,13 +81,11 @@ class RunOptions:
     # None: the calibrated bands (probreg.inference.BAND_SCALE and BAND_CURVATURE_S2); a number
     # scales the bootstrap band by it, without the curvature term (1.0: raw bootstrap bands)
     band_inflation: float | None = None
-    # systematic allowance on the camera height (sd of log height; 0: none), over which the
-    # height-only likelihood terms are marginalised (probreg.inference.heights)
+    # systematic allowance on the camera height (sd of log height; 0: none): probreg.inference.heights
     height_allowance: float = HEIGHT_SYSTEMATIC_SD
     # progress(desc, total) -> a bar with update(n) and close() (e.g. tqdm); None: no bars
     progress: object = None
-    # the camera shot estimated when the clip has cuts (probreg.lanes.shots): "longest", "all" (the
-    # clip as one camera: verdict reason "camera cut") or a shot's number (0-based)
+    # the shot estimated when a clip has cuts (lanes.shots): "longest", "all" (reason "camera cut") or its number
     shot: str = "longest"
     # a slow-motion replay's slow-down: the clip's fps times it is real time (inference.time_base)
     slow_motion: float = 1.0
@@ -119,8 +117,7 @@ class RunResult:
     time_base: dict = field(default_factory=dict)  # run.json's: probreg.inference.time_base.time_base_check
 
 
-#: report figures drawn in a forked process while the files are written (html.run_figures); the
-#: posterior's two (html.posterior_figures) are drawn in one while the bands are summarised
+#: report figures drawn in a forked process while the files are written (html.run_figures, html.posterior_figures)
 REPORT_FIGURES_ELSEWHERE = ("angles", "gait_cycle", "decomposition")
 
 
@@ -329,6 +326,9 @@ def _branch_models(clip, reg, options, given, log):
         if chosen == "wide":
             cand = _branch_candidate(clip, reg, options, given, "wide")
     r, side, lens, model = cand
+    if model.temper_height_terms() < 1:  # after the choice: the branches' evidence compared them untempered
+        log(f"warning: {height_terms_note(model.height_conflict)}: those terms tempered by {model.height_temper:.3g} "
+            "(run.json diagnostics.height_terms)")
     model.timings["branch_s"] = time.perf_counter() - t0
     log(f"camera side: {side.chosen} ({side.source}; log-evidence ratio {side.log_ratio:.1f})")
     log(f"family branch: {choice.chosen} ({choice.source}"
@@ -400,8 +400,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     ahead = (model.bootstrap_copies_ahead(np.random.default_rng([smp.seed, 1]), n_copies)
              if model.bootstraps_noise(smp.bootstrap_noise) else None)
     sampler, tau = model.sample(smp, progress=options.progress)
-    chain = sampler.get_chain()  # (steps, walkers, D)
-    flat = chain.reshape(-1, chain.shape[-1])
+    flat = sampler.get_chain().reshape(-1, len(model.param_names))  # (steps x walkers, D)
     rng = np.random.default_rng(smp.seed)
     draws = flat[rng.choice(len(flat), min(smp.n_draws, len(flat)), replace=False)]
     copies, seeds = ahead() if ahead is not None else (None, None)
@@ -416,6 +415,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
 
         early = fork_call(lambda: posterior_figures(model.priors, idata))
     diag = _diagnostics(sampler, tau, idata, names=model.param_names)
+    diag["height_terms"] = model.height_conflict  # do the camera height's terms agree? (tempered if not)
     height = static_interval(np.exp(flat[:, 0]))  # calibrated 90 % interval (and the model's own)
     athlete = {f"{k}_m": static_interval(v) for k, v in {"stature": flat[:, 1], **model.lengths(flat)}.items()}
     lens_doc = _lens_summary(options, lens, flat)

@@ -67,7 +67,8 @@ from ..lifting import LiftConfig
 from ..lifting.trajectory import _runs, camera_track_config, fit_ground_track
 from .bands import stance_window
 from .camera_path import CameraPath, along_path
-from .heights import HEIGHT_SYSTEMATIC_SD, height_grid, identity_height, limb_consistency, smear_log_likelihood
+from .heights import (HEIGHT_SYSTEMATIC_SD, height_grid, identity_height, limb_consistency, smear_log_likelihood,
+                      term_conflict)
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
 from .parallel import default_workers, fork_map
 from .propagation import DrawPropagation
@@ -200,6 +201,8 @@ class ClipModel(DrawPropagation, EmceeSampling):
             # e.g. a grazing view whose few calibrated frames give no limb lengths at any height
             raise NoCalibrationError("no camera height the lanes allow gives a finite posterior (no limb "
                                      "lengths or no consistent camera at any height)", "no_finite_posterior")
+        # do the height-only terms tell one story? (tempered by temper_height_terms, after the branch choice)
+        self.height_conflict, self.height_temper = term_conflict(self.grid, self._height_term_curves()), 1.0
         self.timings = {"precompute_s": time.perf_counter() - t0}
 
     @property
@@ -568,14 +571,27 @@ class ClipModel(DrawPropagation, EmceeSampling):
             lp = lp + self.lens.prior.logpdf(theta[:, -1])
         return lp
 
+    def _height_term_curves(self):
+        """The height-only likelihood terms on the grid: name -> (G,)."""
+        return {"ground_track": self.track_weight * self.ll_track, "static_camera": self.ll_static,
+                "planted_feet": self.ll_still, "limb_consistency": self.ll_limbs}
+
+    def temper_height_terms(self):
+        """Temper the height-only terms by ``height_conflict["temper"]`` (1 unless they contradict
+        each other: :func:`probreg.inference.heights.term_conflict`); returns the factor.  Done once
+        the family branch is chosen: the branches' evidence compares the terms untempered."""
+        self.height_temper = float(self.height_conflict["temper"])
+        return self.height_temper
+
     def _height_terms(self):
         """The terms that depend on the camera height alone (ground track, static camera,
-        planted feet, the running-speed prior), marginalised over the height's systematic allowance
+        planted feet, limbs' consistency: tempered by ``height_temper``; the running-speed prior),
+        marginalised over the height's systematic allowance
         (:func:`probreg.inference.heights.smear_log_likelihood`): ``(log_grid, ll)``."""
-        key = (self.track_weight, self._precompute_id)
+        key = (self.track_weight, self._precompute_id, getattr(self, "height_temper", 1.0))
         if getattr(self, "_height_cache", (None,))[0] != key:
             with np.errstate(invalid="ignore"):
-                ll = self.track_weight * self.ll_track + self.ll_static + self.ll_still + self.ll_limbs
+                ll = key[2] * sum(self._height_term_curves().values())
                 ll = ll + self.priors.running_speed_logpdf(self.speed_grid)  # a height-only prior term
             self._height_cache = (key, smear_log_likelihood(self.grid, ll, self.height_systematic_sd))
         return self._height_cache[1]
@@ -622,29 +638,3 @@ class ClipModel(DrawPropagation, EmceeSampling):
                 th = np.r_[th, float(self.k1_at(h))]
             theta_grid.append(th)
         return theta_grid, self.log_prob(np.array(theta_grid))
-
-    def initial_walkers(self, n, rng):
-        """Walkers around the best grid height with lengths at their observed values."""
-        theta_grid, lp = self._grid_log_prob()
-        g = int(np.nanargmax(np.where(np.isfinite(lp), lp, -np.inf)))
-        base = theta_grid[g]
-        # stature from the observed thigh + shank at that height, if available
-        obs = [self.seg_obs[s][g] / SEGMENT_PROPORTIONS[s] for s in ("thigh", "shank")]
-        obs = float(np.mean([v for v in obs if np.isfinite(v)] or [np.nan]))  # neither seen: NaN, no warning
-        if np.isfinite(obs):
-            base[1] = obs
-        step = np.log(self.grid[1] / self.grid[0]) if len(self.grid) > 1 else 0.05
-        scale = np.r_[step, 0.02, np.full(len(SEGMENTS), 0.02)]
-        if self.lens is not None:  # a sharp prior (a given lens): start at its mean
-            k_sd = min(self.lens.prior.sd, 0.002 + 0.01 * abs(base[-1]))
-            base[-1] = self.lens.prior.mean if k_sd == self.lens.prior.sd else base[-1]
-            scale = np.r_[scale, k_sd]
-        p0 = base + rng.normal(0, 1, (n, len(base))) * scale
-        # every walker must start where the posterior is positive
-        for _ in range(50):
-            bad = ~np.isfinite(self.log_prob(p0))
-            if not bad.any():
-                break
-            p0[bad] = base + rng.normal(0, 1, (bad.sum(), len(base))) * scale * 0.5
-        return p0
-

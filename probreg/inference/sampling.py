@@ -67,7 +67,35 @@ class SamplerSettings:
 
 class EmceeSampling:
     """The sampling half of :class:`probreg.inference.ClipModel` (needs ``param_names``,
-    ``log_prob`` (vectorised over walkers), ``initial_walkers`` and ``timings``)."""
+    ``log_prob`` (vectorised over walkers), ``_grid_log_prob``, ``seg_obs``, ``grid``, ``lens`` and
+    ``timings``)."""
+
+    def initial_walkers(self, n, rng):
+        """Walkers around the best grid height with lengths at their observed values."""
+        from .priors import SEGMENT_PROPORTIONS
+
+        theta_grid, lp = self._grid_log_prob()
+        g = int(np.nanargmax(np.where(np.isfinite(lp), lp, -np.inf)))
+        base = theta_grid[g]
+        # stature from the observed thigh + shank at that height, if available
+        obs = [self.seg_obs[s][g] / SEGMENT_PROPORTIONS[s] for s in ("thigh", "shank")]
+        obs = float(np.mean([v for v in obs if np.isfinite(v)] or [np.nan]))  # neither seen: NaN, no warning
+        if np.isfinite(obs):
+            base[1] = obs
+        step = np.log(self.grid[1] / self.grid[0]) if len(self.grid) > 1 else 0.05
+        scale = np.r_[step, 0.02, np.full(len(base) - 2 - (self.lens is not None), 0.02)]  # the multipliers
+        if self.lens is not None:  # a sharp prior (a given lens): start at its mean
+            k_sd = min(self.lens.prior.sd, 0.002 + 0.01 * abs(base[-1]))
+            base[-1] = self.lens.prior.mean if k_sd == self.lens.prior.sd else base[-1]
+            scale = np.r_[scale, k_sd]
+        p0 = base + rng.normal(0, 1, (n, len(base))) * scale
+        # every walker must start where the posterior is positive
+        for _ in range(50):
+            bad = ~np.isfinite(self.log_prob(p0))
+            if not bad.any():
+                break
+            p0[bad] = base + rng.normal(0, 1, (bad.sum(), len(base))) * scale * 0.5
+        return p0
 
     def sample(self, settings: SamplerSettings = SamplerSettings(), progress=None):
         """Run emcee; returns ``(sampler, tau)``.

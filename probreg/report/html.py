@@ -262,6 +262,7 @@ def run_report(out_html, clip, result, joints_median, cameras, rendered=None):
     ``rendered`` ({key: PNG bytes}, :func:`render_figures`) holds figures drawn elsewhere; the
     others are drawn here.  The page is the same either way."""
     from ..analysis import GAIT_FIELDS
+    from ..inference.heights import height_terms_note
 
     figs = run_figures(clip, result)
     rendered = dict(rendered or {})
@@ -301,6 +302,11 @@ def run_report(out_html, clip, result, joints_median, cameras, rendered=None):
                   f"factor {h['interval_scale']:g} (the model's posterior is narrower "
                   "than its errors on clips with known truth; probreg.inference.STATIC_INTERVAL_SCALE); "
                   "posterior.nc holds the draws themselves.", cls="note")
+    if (terms := d.get("height_terms") or {}).get("temper", 1.0) < 1.0:
+        rep.paragraph(f"The {height_terms_note(terms)}: they were tempered by "
+                      f"{terms['temper']:.3g} (their Birge ratio), so the height's interval spans their "
+                      "disagreement (run.json diagnostics.height_terms; probreg.inference.heights.term_conflict).",
+                      cls="note")
     st = result.athlete["stature_m"]
     rep.paragraph(scale_note(result.model.priors.stature, post["stature"].values.ravel(), (st["lo"], st["hi"])),
                   cls="note")

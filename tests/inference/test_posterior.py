@@ -178,6 +178,9 @@ def test_run_pipeline_writes_the_result_layout(small_clip, tmp_path):
     assert (run["gait_verdict"] == "ok") == (not run["gait_verdict_reasons"])
     assert gait["speed_mps"]["status"] == "ok" and gait["cadence_spm"]["status"] == run["gait_verdict"]
     assert "cadence_stride_pattern_spm" in run["diagnostics"]  # NaN here: 40 frames hold no two strides
+    terms = run["diagnostics"]["height_terms"]  # do the camera height's terms agree (inference.heights)
+    assert {"conflict_nats", "threshold_nats", "temper", "peaks_m", "deficits_nats"} <= set(terms)
+    assert (terms["temper"] < 1) == (terms["conflict_nats"] > terms["threshold_nats"])
     import arviz as az
 
     idata = az.from_netcdf(str(out / "posterior.nc"))
