@@ -588,10 +588,11 @@ class ClipModel(DrawPropagation, EmceeSampling):
         planted feet, limbs' consistency: tempered by ``height_temper``; the running-speed prior),
         marginalised over the height's systematic allowance
         (:func:`probreg.inference.heights.smear_log_likelihood`): ``(log_grid, ll)``."""
-        key = (self.track_weight, self._precompute_id, getattr(self, "height_temper", 1.0))
+        temper = getattr(self, "height_temper", 1.0)  # set once the model is built (1 while it is)
+        key = (self.track_weight, self._precompute_id, temper)
         if getattr(self, "_height_cache", (None,))[0] != key:
             with np.errstate(invalid="ignore"):
-                ll = key[2] * sum(self._height_term_curves().values())
+                ll = temper * sum(self._height_term_curves().values())
                 ll = ll + self.priors.running_speed_logpdf(self.speed_grid)  # a height-only prior term
             self._height_cache = (key, smear_log_likelihood(self.grid, ll, self.height_systematic_sd))
         return self._height_cache[1]

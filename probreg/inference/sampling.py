@@ -18,6 +18,8 @@ from dataclasses import dataclass
 
 import numpy as np
 
+from .priors import SEGMENT_PROPORTIONS
+
 __all__ = ["SamplerSettings", "EmceeSampling", "MOVES"]
 
 #: the move mixtures ``SamplerSettings.moves`` names
@@ -72,8 +74,6 @@ class EmceeSampling:
 
     def initial_walkers(self, n, rng):
         """Walkers around the best grid height with lengths at their observed values."""
-        from .priors import SEGMENT_PROPORTIONS
-
         theta_grid, lp = self._grid_log_prob()
         g = int(np.nanargmax(np.where(np.isfinite(lp), lp, -np.inf)))
         base = theta_grid[g]
@@ -83,7 +83,7 @@ class EmceeSampling:
         if np.isfinite(obs):
             base[1] = obs
         step = np.log(self.grid[1] / self.grid[0]) if len(self.grid) > 1 else 0.05
-        scale = np.r_[step, 0.02, np.full(len(base) - 2 - (self.lens is not None), 0.02)]  # the multipliers
+        scale = np.r_[step, 0.02, np.full(len(SEGMENT_PROPORTIONS), 0.02)]
         if self.lens is not None:  # a sharp prior (a given lens): start at its mean
             k_sd = min(self.lens.prior.sd, 0.002 + 0.01 * abs(base[-1]))
             base[-1] = self.lens.prior.mean if k_sd == self.lens.prior.sd else base[-1]
