@@ -18,8 +18,6 @@ from ..io.clip import Clip
 from ..lanes import (
     FrameLanes,
     LaneDetectorConfig,
-    colour_histogram,
-    histogram_change,
     smooth_vanishing_points,
     split_shots,
     line_straightness_px,
@@ -508,7 +506,7 @@ SPLIT_MIN_FRAMES = 60
 SPLIT_SHARE = 0.40
 
 
-def _track_sized(frames, image_size, config, keypoints_px):
+def _track_sized(frames, image_size, config, keypoints_px, warmup=0):
     """:func:`probreg.lanes.track_lanes` on frames ``(index, image)`` of which those whose size is not
     the clip's ``image_size`` count as unreadable: status ``bad_image``, their size in
     ``extra["image_size_px"]`` (their lines, in other pixels, would give another camera)."""
@@ -520,7 +518,7 @@ def _track_sized(frames, image_size, config, keypoints_px):
                 wrong[i], img = [int(img.shape[1]), int(img.shape[0])], None
             yield i, img
 
-    fls = track_lanes(sized(), config, keypoints_px=keypoints_px)
+    fls = track_lanes(sized(), config, keypoints_px=keypoints_px, warmup=warmup)
     return [replace(fl, extra={**fl.extra, "image_size_px": wrong[fl.frame]}) if fl.frame in wrong else fl
             for fl in fls]
 
@@ -557,10 +555,10 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
     waiting for its result, e.g. :func:`probreg.inference.parallel.fork_call`), a clip of
     :data:`SPLIT_MIN_FRAMES` frames or more in an image folder is followed in two parts, the
     first :data:`SPLIT_SHARE` of it here, the rest in the background from a frame the single
-    pass would detect in full too (so every frame is measured as in one pass, but for the frame
-    after the seam: its global-motion estimate differs by ~0.01 px, as OpenCV windows the
-    previous image in place in one pass), its line identities then continued from the first
-    part's (:func:`probreg.lanes.tracking.stitch_tracks`).
+    pass would detect in full too, two frames early to replay the global motion and colour change
+    at the seam (so every frame is measured exactly as in one pass: the result does not depend on
+    the cores), its line identities then continued from the first part's
+    (:func:`probreg.lanes.tracking.stitch_tracks`).
     ``started()``, when given, is called once the background work is started (threads must
     start only then: a fork while another thread holds an import lock could hang).
 
@@ -583,8 +581,11 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
     mid = int(n * SPLIT_SHARE) // step * step if background is not None and clip.frame_paths \
         and n >= SPLIT_MIN_FRAMES else n
     mid = mid if 0 < mid < n else n
-    second = background(lambda: _track_sized(iter_frames(clip, start=mid), clip.image_size, config, kp)) \
-        if mid < n else None
+    # the second part starts two frames early: they only replay the global-motion and colour state
+    # the one pass has at its seam (:func:`probreg.lanes.track_lanes` ``warmup``)
+    warm = min(2, mid)
+    second = background(lambda: _track_sized(iter_frames(clip, start=mid - warm), clip.image_size, config, kp,
+                                             warmup=warm)) if mid < n else None
     if started is not None:
         started()
     bar = progress("lanes", n) if progress is not None else None
@@ -606,8 +607,6 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
     fls = [replace(fl, image_size=clip.image_size,
                    status="missing_image" if fl.frame in missing or i in missing else fl.status)
            if fl.status == "bad_image" else fl for i, fl in enumerate(fls)]
-    if mid < n:  # the second part compared its first frame with nothing: compare across the seam
-        fls[mid] = replace(fls[mid], extra={**fls[mid].extra, "colour_change": _seam_change(clip, mid)})
     change = [fl.extra.get("colour_change", np.nan) for fl in fls]
     # the lanes' own families (before the vanishing-point smoother, which would blur a cut)
     raw = [_family_or_none(fl, (1.0, 0.0), clip.lane_width_m) for fl in fls]
@@ -621,13 +620,6 @@ def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(),
     reg = register_frames(fls, clip.image_size, (1.0, 0.0), clip.lane_width_m, smooth=smooth)
     reg.shots = shots
     return reg
-
-
-def _seam_change(clip, i):
-    """The colour change of frame ``i`` from frame ``i - 1`` (:func:`probreg.lanes.shots.histogram_change`)."""
-    from ..io.frames import read_frame
-
-    return histogram_change(colour_histogram(read_frame(clip, i - 1)), colour_histogram(read_frame(clip, i)))
 
 
 def camera_json(cameras, height_m, n_frames, lo=None, hi=None):

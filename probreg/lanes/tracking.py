@@ -26,7 +26,7 @@ from .types import FrameLanes, LaneDetectorConfig
 __all__ = ["track_lanes", "stitch_tracks"]
 
 
-def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypoints_px=None):
+def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypoints_px=None, warmup=0):
     """Lanes of a frame sequence, following the lines from frame to frame.
 
     The broadcast camera moves smoothly, so each frame's lines are first
@@ -42,6 +42,11 @@ def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypo
     keypoints_px : ndarray (F, 17, 2 or 3), optional
         The athlete's 2-D keypoints by frame index: line evidence near the athlete
         (:func:`athlete_mask`) is ignored.
+    warmup : int
+        The first ``warmup`` frames only prepare the global motion and the colour change of the
+        next one, as the frames before them would have in one pass over the whole sequence
+        (they give no lanes): a sequence followed in parts (:func:`probreg.calibration.register_clip`)
+        starts each later part two frames early, and its frames come out as from one pass.
 
     Returns
     -------
@@ -54,13 +59,13 @@ def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypo
     prev = last_ok = None
     next_id = 0
     prev_small = window = prev_hist = None
-    for k, (i, img) in enumerate(frames):
+    k = -int(warmup) - 1  # the frame's number in the sequence, the warm-up frames' negative
+    for i, img in frames:
+        k += 1
         hist = colour_histogram(img)
         fl = None
         shift = np.zeros(2)
         small = None
-        exclude = (athlete_mask(keypoints_px[i]) if keypoints_px is not None and 0 <= i < len(keypoints_px)
-                   else None)
         if img is not None and getattr(img, "ndim", 0) == 3 and img.size:
             # global image motion from the previous frame (phase correlation of a small grey
             # copy): predicts where the lines went when the camera pans or shakes
@@ -74,9 +79,17 @@ def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypo
             if prev_small is not None and prev_small.shape == small.shape:
                 if window is None or window.shape != small.shape:
                     window = cv2.createHanningWindow(small.shape[::-1], cv2.CV_32F)
+                # OpenCV windows both images in place: each frame's is windowed again as the next
+                # frame's previous one (kept as it is: every known answer rests on it; the
+                # warm-up frames of a later part replay it, so that parts equal one pass)
                 (dx, dy), resp = cv2.phaseCorrelate(prev_small, small, window)
                 if resp > 0.05:
                     shift = np.array([dx, dy]) / scale
+        if k < 0:  # a warm-up frame: its motion image and colours are the next frame's previous
+            prev_small, prev_hist = small, hist
+            continue
+        exclude = (athlete_mask(keypoints_px[i]) if keypoints_px is not None and 0 <= i < len(keypoints_px)
+                   else None)
         if prev is not None and prev.ok and small is not None and k % max(config.redetect_every, 1):
             size = (img.shape[1], img.shape[0])
             chords = [c for c in (_image_chord(_translate(ln.line, shift), size) for ln in prev.lines)

@@ -259,3 +259,27 @@ def test_lanes_followed_in_two_parts_match_the_lanes_followed_in_one(small_clip,
     rel = [abs(x.members(f)["height_m"][0] / y.members(f)["height_m"][0] - 1)
            for x, y in zip(one.sequence.families, two.sequence.families) if x is not None and y is not None]
     assert len(rel) > 30 and np.nanmax(rel) < 1e-3
+
+
+def test_a_clip_followed_in_two_parts_equals_one_pass(small_clip, monkeypatch):
+    """The lane step splits a long clip over two processes when two cores are there; the result must
+    not depend on that (``probreg batch`` runs single-core, so a batch result must equal a
+    ``probreg run`` on two cores): every frame's lines, identities and colour change as in one pass,
+    the frames after the seam included (OpenCV's phase correlation windows its images in place,
+    which the second part replays from two warm-up frames)."""
+    import probreg.calibration.registration as registration
+    from probreg.inference.parallel import fork_call
+
+    clip = load_clip(small_clip)
+    monkeypatch.setattr(registration, "SPLIT_MIN_FRAMES", 20)
+    one = register_clip(clip).frame_lanes
+    two = register_clip(clip, background=fork_call).frame_lanes
+    mid = int(clip.n_frames * registration.SPLIT_SHARE) // 10 * 10
+    assert 0 < mid < clip.n_frames - 2 and sum(fl.ok for fl in one[mid:]) >= 0.9 * (clip.n_frames - mid)
+    assert [fl.frame for fl in two] == list(range(clip.n_frames))
+    for a, b in zip(one, two):
+        assert (a.status, len(a.lines)) == (b.status, len(b.lines)), a.frame
+        assert [ln.track_id for ln in a.lines] == [ln.track_id for ln in b.lines], a.frame
+        for la, lb in zip(a.lines, b.lines):
+            assert np.array_equal(la.line, lb.line) and np.array_equal(la.points_px, lb.points_px), a.frame
+        assert np.array_equal(a.extra["colour_change"], b.extra["colour_change"], equal_nan=True), a.frame
