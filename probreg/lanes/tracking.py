@@ -59,9 +59,7 @@ def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypo
     prev = last_ok = None
     next_id = 0
     prev_small = window = prev_hist = None
-    k = -int(warmup) - 1  # the frame's number in the sequence, the warm-up frames' negative
-    for i, img in frames:
-        k += 1
+    for k, (i, img) in enumerate(frames, start=-int(warmup)):  # the warm-up frames' k are negative
         hist = colour_histogram(img)
         fl = None
         shift = np.zeros(2)

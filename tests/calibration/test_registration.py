@@ -233,10 +233,13 @@ def test_a_given_lens_straightens_the_lines_only_near_its_own_focal_length(disto
     assert abs(m["height_m"][2] / cam.C[2] - 1) < 0.002
 
 
-def test_lanes_followed_in_two_parts_match_the_lanes_followed_in_one(small_clip, monkeypatch):
-    """With a background worker the clip's second part is followed on its own, from a frame
-    the one pass detects in full too: the same statuses, the same lines (to a thousandth of a pixel), the same
-    line identities across the seam; ``started`` runs once the background work is under way."""
+def test_lanes_followed_in_two_parts_equal_the_lanes_followed_in_one(small_clip, monkeypatch):
+    """With a background worker the clip's second part is followed on its own, from a frame the one
+    pass detects in full too, two warm-up frames early: every frame's status, lines, identities,
+    colour change and family exactly as in one pass, the frames after the seam included (OpenCV's
+    phase correlation windows its images in place, which the warm-up replays).  The result must not
+    depend on the cores: ``probreg batch`` runs single-core, a ``probreg run`` on two cores splits.
+    ``started`` runs once the background work is under way."""
     import probreg.calibration.registration as registration
     from probreg.inference.parallel import fork_call
 
@@ -246,40 +249,16 @@ def test_lanes_followed_in_two_parts_match_the_lanes_followed_in_one(small_clip,
     calls = []
     two = register_clip(clip, background=fork_call, started=lambda: calls.append(1))
     assert calls == [1]
+    mid = int(clip.n_frames * registration.SPLIT_SHARE) // 10 * 10
+    assert 0 < mid < clip.n_frames - 2 and sum(fl.ok for fl in one.frame_lanes[mid:]) >= 0.9 * (clip.n_frames - mid)
+    assert [fl.frame for fl in two.frame_lanes] == list(range(clip.n_frames))
     assert [fl.status for fl in one.frame_lanes] == [fl.status for fl in two.frame_lanes]
     for i, (a, b) in enumerate(zip(one.frame_lanes, two.frame_lanes)):
         assert [ln.track_id for ln in a.lines] == [ln.track_id for ln in b.lines], i
         for la, lb in zip(a.lines, b.lines):
-            assert np.allclose(la.line / np.linalg.norm(la.line[:2]), lb.line / np.linalg.norm(lb.line[:2]),
-                               atol=1e-3), i
-            # px: not bit for bit: OpenCV's phaseCorrelate windows its second input in place, so
-            # the one pass correlates each frame with a twice-windowed previous image, the second
-            # part's first followed frame with a once-windowed one (a shift differing by ~0.01 px)
+            assert np.array_equal(la.line, lb.line) and np.array_equal(la.points_px, lb.points_px), i
+        assert np.array_equal(a.extra["colour_change"], b.extra["colour_change"], equal_nan=True), i
     f = np.array([2500.0])
-    rel = [abs(x.members(f)["height_m"][0] / y.members(f)["height_m"][0] - 1)
-           for x, y in zip(one.sequence.families, two.sequence.families) if x is not None and y is not None]
-    assert len(rel) > 30 and np.nanmax(rel) < 1e-3
-
-
-def test_a_clip_followed_in_two_parts_equals_one_pass(small_clip, monkeypatch):
-    """The lane step splits a long clip over two processes when two cores are there; the result must
-    not depend on that (``probreg batch`` runs single-core, so a batch result must equal a
-    ``probreg run`` on two cores): every frame's lines, identities and colour change as in one pass,
-    the frames after the seam included (OpenCV's phase correlation windows its images in place,
-    which the second part replays from two warm-up frames)."""
-    import probreg.calibration.registration as registration
-    from probreg.inference.parallel import fork_call
-
-    clip = load_clip(small_clip)
-    monkeypatch.setattr(registration, "SPLIT_MIN_FRAMES", 20)
-    one = register_clip(clip).frame_lanes
-    two = register_clip(clip, background=fork_call).frame_lanes
-    mid = int(clip.n_frames * registration.SPLIT_SHARE) // 10 * 10
-    assert 0 < mid < clip.n_frames - 2 and sum(fl.ok for fl in one[mid:]) >= 0.9 * (clip.n_frames - mid)
-    assert [fl.frame for fl in two] == list(range(clip.n_frames))
-    for a, b in zip(one, two):
-        assert (a.status, len(a.lines)) == (b.status, len(b.lines)), a.frame
-        assert [ln.track_id for ln in a.lines] == [ln.track_id for ln in b.lines], a.frame
-        for la, lb in zip(a.lines, b.lines):
-            assert np.array_equal(la.line, lb.line) and np.array_equal(la.points_px, lb.points_px), a.frame
-        assert np.array_equal(a.extra["colour_change"], b.extra["colour_change"], equal_nan=True), a.frame
+    heights = [(x.members(f)["height_m"][0], y.members(f)["height_m"][0])
+               for x, y in zip(one.sequence.families, two.sequence.families) if x is not None and y is not None]
+    assert len(heights) > 30 and all(x == y or (np.isnan(x) and np.isnan(y)) for x, y in heights)
