@@ -247,9 +247,10 @@ def _cmd_calibrate(args):
 
 
 def _cmd_lift(args):
-    from .io.clip import atomic_output_dir, load_clip, read_cameras_json, with_slow_motion, write_json
+    from .io.clip import (atomic_output_dir, load_clip, read_cameras_json, read_segments_json, with_slow_motion,
+                          write_json)
     from .io.results import write_angles_csv, write_joints_npz
-    from .lifting import LiftConfig, lift
+    from .lifting import LiftConfig, implausible_segments, lift
 
     _prepare_out(args.out, [args.clip, args.cameras], args.overwrite)
     clip = with_slow_motion(load_clip(args.clip, min_score=args.min_score), args.slow_motion)
@@ -261,27 +262,25 @@ def _cmd_lift(args):
     cams = [cams_by_frame.get(i) for i in range(clip.n_frames)]
     if not any(c is not None for c in cams):
         raise CliError(f"{args.cameras}: no frame has a camera")
-    segments = None
-    if args.segments:
-        import json
-
-        try:
-            segments = json.loads(Path(args.segments).read_text())
-            segments = segments.get("segments_m", segments)
-        except (OSError, ValueError) as exc:
-            raise CliError(f"{args.segments}: cannot read segment lengths ({exc})") from None
+    segments = read_segments_json(args.segments) if args.segments else None
     cfg = LiftConfig(min_score=args.min_score, smooth_cutoff_hz=None if args.no_smooth else "auto")
     res = lift(cams, clip.keypoints_px, clip.fps, segments_m=segments, config=cfg)
     ang = res.angles_deg()
+    if odd := ([] if segments else implausible_segments(res.segments_m)):  # given lengths: the user's word
+        print(f"warning: leg lengths no runner has ({', '.join(odd)}): do the cameras fit this clip?", file=sys.stderr)
     with atomic_output_dir(args.out, overwrite=args.overwrite, inputs=[args.clip, args.cameras], log=print) as tmp:
         write_joints_npz(tmp / "joints3d.npz", res.joints_track_m)
         write_angles_csv(tmp / "angles.csv", clip.fps, ang)
         write_json(tmp / "lift.json", {"frame_status": res.status, "segments_m": res.segments_m,
                                       "track_status": res.track.status,
                                       "contacts": res.track.contacts.astype(int).tolist(),
-                                      "ground_track_m": res.track.position_m})
+                                      "ground_track_m": res.track.position_m, "implausible_segments": odd})
     n_ok = sum(s in ("ok", "interpolated") for s in res.status)
     print(f"lifted {n_ok}/{clip.n_frames} frames -> {args.out}")
+    if n_ok == 0:  # files written (every frame's status in lift.json), but nothing to use: not a success
+        print(f"probreg lift: warning: no frame was lifted (track {res.track.status}); see lift.json's frame_status",
+              file=sys.stderr)
+        return 3
     return 0
 
 

@@ -26,6 +26,7 @@ __all__ = [
     "with_slow_motion",
     "load_groundtruth",
     "read_keypoints_json",
+    "read_segments_json",
     "write_keypoints_json",
     "read_cameras_json",
     "write_json",
@@ -224,10 +225,13 @@ def read_keypoints_json(path, n_frames=None):
     for k, entry in enumerate(frames):
         if not isinstance(entry, dict) or "frame" not in entry:
             raise ClipFormatError(f"{path}: frames[{k}] lacks 'frame'")
+        v = entry["frame"]
         try:
-            fi = int(entry["frame"])
+            fi = int(v)
+            if isinstance(v, bool) or fi != v:  # 5.5 or true: not a frame number (int() would take them)
+                raise ValueError
         except (TypeError, ValueError):
-            raise ClipFormatError(f"{path}: frames[{k}] has a non-integer frame index") from None
+            raise ClipFormatError(f"{path}: frames[{k}] has a non-integer frame index {v!r}") from None
         if fi < 0:
             raise ClipFormatError(f"{path}: frames[{k}] has a negative frame index {fi}")
         if fi in first:  # two detections for one frame: which one is the athlete is not ours to guess
@@ -471,10 +475,36 @@ def read_cameras_json(path, image_size=(1920, 1080)):
             out[fi] = None
             continue
         try:
-            out[fi] = Camera.from_dict(entry, image_size=image_size)
+            out[fi] = cam = Camera.from_dict(entry, image_size=image_size)
         except (ValueError, TypeError) as exc:
             raise ClipFormatError(f"{path}: frame {fi}: {exc}") from None
+        if not cam.C[2] > 0:  # the rays would never come down onto the track
+            raise ClipFormatError(f"{path}: frame {fi}: camera centre at z = {cam.C[2]:g} m, not above the track "
+                                  f"(the track frame's z points up from the track at z = 0; CLIP_FORMAT)")
     return out
+
+
+#: user-given segment lengths above this (m) are taken for a unit error: no human segment
+#: (thigh, trunk, shoulder width, ...) is longer, and lengths in centimetres all are
+MAX_GIVEN_SEGMENT_M = 1.5
+
+
+def read_segments_json(path):
+    """Segment lengths (m) a user gives in a JSON file: ``{"thigh": 0.45, ...}`` or an
+    ``athlete.json`` with them under ``"segments_m"``.  Raises :class:`ClipFormatError` for a
+    file that is not such an object, or a length above :data:`MAX_GIVEN_SEGMENT_M` (centimetres
+    for metres); the names and values are checked by the lifting (:func:`probreg.lifting.lift`)."""
+    path = Path(path)
+    doc = _read_json(path)
+    seg = doc.get("segments_m", doc) if isinstance(doc, dict) else doc
+    if not isinstance(seg, dict):
+        raise ClipFormatError(f"{path}: expected an object of segment lengths in metres, e.g. "
+                              f'{{"thigh": 0.45, "shank": 0.43}} (or an athlete.json with "segments_m")')
+    for name, v in seg.items():
+        if isinstance(v, (int, float)) and not isinstance(v, bool) and v > MAX_GIVEN_SEGMENT_M:
+            raise ClipFormatError(f"{path}: segment {name!r} is {v:g} m long; lengths are in metres (no human "
+                                  f"segment exceeds {MAX_GIVEN_SEGMENT_M:g} m: centimetres?)")
+    return seg
 
 
 def load_groundtruth(path):

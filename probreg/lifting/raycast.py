@@ -42,7 +42,8 @@ from ..geometry import (
 )
 from .trajectory import GroundTrack, fit_ground_track
 
-__all__ = ["LiftConfig", "LiftResult", "estimate_segments", "lift", "smooth_angles_across_strides", "ANTHROPOMETRIC_RATIOS"]
+__all__ = ["LiftConfig", "LiftResult", "estimate_segments", "implausible_segments", "lift",
+           "smooth_angles_across_strides", "ANTHROPOMETRIC_RATIOS"]
 
 
 J = JOINT_INDEX
@@ -407,6 +408,27 @@ def _given_segments(segments_m):
             raise ValueError(f"segment length {k!r} must be a positive length in metres, got {v!r}")
         out[k] = x
     return out
+
+
+#: thigh and shank lengths (m) of adults 1.50-2.10 m tall (Winter 2009: about 0.245 of the
+#: stature each, 0.37-0.51 m), widened by about a third either way
+HUMAN_LEG_SEGMENT_M = (0.25, 0.70)
+
+
+def implausible_segments(segments_m):
+    """The leg segments of ``segments_m`` no adult runner has, as short strings (empty: none).
+
+    Estimated from the clip, such lengths mean cameras that do not fit it (another clip's, a
+    wrong scale): every 3D number of the lifting is then off by the same factor.
+
+    >>> implausible_segments({"thigh": 0.45, "shank": 0.44})
+    []
+    >>> implausible_segments({"thigh": 0.027, "shank": None})
+    ['thigh 0.027 m']
+    """
+    lo, hi = HUMAN_LEG_SEGMENT_M
+    return [f"{k} {v:.3g} m" for k in ("thigh", "shank")
+            if (v := segments_m.get(k)) is not None and np.isfinite(v) and not lo <= v <= hi]
 
 
 def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | None = None,

@@ -448,3 +448,66 @@ def test_bench_validation_refuses_to_score_old_result_folders(tmp_path):
     with pytest.raises(ValueError, match="already there"):
         _run_sets(rep, [("validation clips (test)", {}, [other])], None, keep=keep)
     assert (old_lift / "angles.csv").read_text() == "old"
+
+
+# ----------------------------------------------------------------------------- found by fuzzing (dev19)
+@pytest.mark.parametrize("value", [5.5, True])
+def test_a_frame_index_that_is_not_a_whole_number_is_a_clear_error(clip, tmp_path, capsys, value):
+    doc = json.loads((clip / "keypoints2d.json").read_text())
+    doc["frames"][5]["frame"] = value  # int() would have read 5 and 1 (a second frame 1) without a word
+    (clip / "keypoints2d.json").write_text(json.dumps(doc))
+    assert main(["run", str(clip), "--out", str(tmp_path / "o")]) == 2
+    _one_error_line(capsys, "keypoints2d.json", "frames[5] has a non-integer frame index")
+
+
+def _lift(clip, tmp_path, cameras, *extra):
+    return main(["lift", str(clip), "--cameras", str(cameras), "--out", str(tmp_path / "o"), *extra])
+
+
+@pytest.mark.parametrize("content, needle", [("[0.45, 0.43]", "expected an object of segment lengths"),
+                                             ('{"thigh": 45, "shank": 43}', "'thigh' is 45 m long"),
+                                             ('{"segments_m": {"shank": 430}}', "centimetres?")])
+def test_segment_files_that_are_no_lengths_in_metres_are_clear_errors(clip, tmp_path, capsys, content, needle):
+    (tmp_path / "seg.json").write_text(content)  # a list used to end in an AttributeError traceback
+    assert _lift(clip, tmp_path, clip / "groundtruth" / "cameras.json", "--segments", str(tmp_path / "seg.json")) == 2
+    _one_error_line(capsys, "seg.json", needle)
+    assert not (tmp_path / "o").exists()
+
+
+def test_a_camera_below_the_track_is_a_clear_error(clip, tmp_path, capsys):
+    doc = json.loads((clip / "groundtruth" / "cameras.json").read_text())
+    doc["frames"][3]["C"][2] = -5.0  # used to lift every frame to NaN with exit 0
+    (tmp_path / "cams.json").write_text(json.dumps(doc))
+    assert _lift(clip, tmp_path, tmp_path / "cams.json") == 2
+    _one_error_line(capsys, "cams.json", "frame 3: camera centre at z = -5 m, not above the track")
+
+
+def test_lift_says_when_the_cameras_give_no_runner(clip, tmp_path, capsys):
+    """Cameras that do not fit the clip (here all at one point beside the athlete) lift to legs a
+    few centimetres long: said on stderr and in lift.json; the clip's own cameras say nothing."""
+    cams = clip / "groundtruth" / "cameras.json"
+    assert _lift(clip, tmp_path, cams) == 0
+    assert "leg lengths" not in capsys.readouterr().err
+    assert json.loads((tmp_path / "o" / "lift.json").read_text())["implausible_segments"] == []
+    doc = json.loads(cams.read_text())
+    for f in doc["frames"]:
+        f["C"] = [0.0, 3.0, 1.0]
+    (tmp_path / "cams.json").write_text(json.dumps(doc))
+    assert _lift(clip, tmp_path, tmp_path / "cams.json", "--overwrite") == 0
+    assert "warning: leg lengths no runner has (thigh 0.0" in capsys.readouterr().err
+    odd = json.loads((tmp_path / "o" / "lift.json").read_text())["implausible_segments"]
+    assert [s.split()[0] for s in odd] == ["thigh", "shank"]
+
+
+def test_lift_with_no_frame_lifted_exits_3_with_its_files(clip, tmp_path, capsys):
+    doc = json.loads((clip / "keypoints2d.json").read_text())
+    for f in doc["frames"]:
+        for j in range(1, 7):  # no hip, knee or ankle anywhere: no contact, no ground track
+            if f["keypoints"] is not None:
+                f["keypoints"][j][2] = 0.0
+    (clip / "keypoints2d.json").write_text(json.dumps(doc))
+    assert _lift(clip, tmp_path, clip / "groundtruth" / "cameras.json") == 3
+    err = capsys.readouterr().err
+    assert "Traceback" not in err and "no frame was lifted" in err
+    status = json.loads((tmp_path / "o" / "lift.json").read_text())["frame_status"]
+    assert len(status) == 40 and "ok" not in status
