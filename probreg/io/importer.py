@@ -40,6 +40,10 @@ def import_clip(out, keypoints, video=None, frames=None, fps=None, fmt=None, lay
     kp = read_keypoints(keypoints, fmt, **kwargs)
     if (video is None) == (frames is None):
         raise ClipFormatError("give exactly one of --video FILE or --frames DIR")
+    if fps is not None and not (np.isfinite(fps) and fps > 0):  # not "unknown": the user gave one
+        raise ClipFormatError(f"--fps must be a positive frame rate (frames per second), got {fps:g}")
+    if not np.isfinite(np.asarray(kp, float)[..., :2]).any():
+        log(f"warning: {keypoints}: no joint in any frame; 'probreg run' will refuse the clip")
     import cv2
 
     images = None

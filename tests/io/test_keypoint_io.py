@@ -136,3 +136,20 @@ def test_import_command_builds_a_clip(tmp_path, coco_kp):
     np.save(tmp_path / "long.npy", np.concatenate([coco_kp, coco_kp]))
     assert main(["import", "--keypoints", str(tmp_path / "long.npy"), "--frames", str(frames), "--fps", "50",
                  "--out", str(tmp_path / "c3")]) == 2  # more keypoint frames than images
+
+
+def test_import_names_a_bad_frame_rate_and_warns_of_keypoints_without_joints(tmp_path, coco_kp, capsys):
+    frames = tmp_path / "imgs"
+    frames.mkdir()
+    for i in range(6):
+        cv2.imwrite(str(frames / f"img{i:03d}.png"), np.zeros((72, 128, 3), np.uint8))
+    np.save(tmp_path / "kp.npy", coco_kp)
+    args = ["import", "--keypoints", str(tmp_path / "kp.npy"), "--layout", "coco17", "--frames", str(frames)]
+    assert main([*args, "--fps", "-5", "--out", str(tmp_path / "c1")]) == 2
+    assert "--fps must be a positive frame rate (frames per second), got -5" in capsys.readouterr().err
+    np.save(tmp_path / "nan.npy", np.full_like(coco_kp, np.nan))
+    assert main(["import", "--keypoints", str(tmp_path / "nan.npy"), "--layout", "coco17", "--frames", str(frames),
+                 "--fps", "50", "--out", str(tmp_path / "c2")]) == 0
+    assert "no joint in any frame" in capsys.readouterr().out
+    assert main([*args, "--fps", "50", "--out", str(tmp_path / "c3")]) == 0
+    assert "no joint" not in capsys.readouterr().out
