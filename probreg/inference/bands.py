@@ -223,9 +223,9 @@ def angle_bands(angles_point, angles_noisy, fps=None, lo=5.0, hi=95.0, inflation
 
 
 #: Scale of the bootstrap deviations of the gait numbers, fitted on held-out synthetic clips
-#: for 90 % coverage over all clips and numbers (``probreg bench band-calibration``).  Re-fitted
-#: at 0.2.0.dev19 (2.25 -> 2.54: the fit had drifted to 2.45 by dev12 and the constant was left;
-#: the judge sets' contact and flight times and cadence held the truth on 70-80 % of clips).
+#: for 90 % coverage over all clips and numbers (``probreg bench band-calibration``: its own eight
+#: calibration clips, never the validation or held-out sets, which only check it).  Re-fitted at
+#: 0.2.0.dev19, 2.25 -> 2.54: the bench's fit had drifted to 2.45 by dev12 and the constant was left.
 GAIT_BAND_SCALE = 2.54
 
 #: Name endings of the gait numbers that cannot be negative (their intervals stop at zero).

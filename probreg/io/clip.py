@@ -501,8 +501,12 @@ def read_segments_json(path):
         raise ClipFormatError(f"{path}: expected an object of segment lengths in metres, e.g. "
                               f'{{"thigh": 0.45, "shank": 0.43}} (or an athlete.json with "segments_m")')
     for name, v in seg.items():
-        if isinstance(v, (int, float)) and not isinstance(v, bool) and v > MAX_GIVEN_SEGMENT_M:
-            raise ClipFormatError(f"{path}: segment {name!r} is {v:g} m long; lengths are in metres (no human "
+        try:
+            x = float("nan") if isinstance(v, bool) else float(v)
+        except (TypeError, ValueError):
+            continue  # not a number: the lifting names it
+        if x > MAX_GIVEN_SEGMENT_M:
+            raise ClipFormatError(f"{path}: segment {name!r} is {x:g} m long; lengths are in metres (no human "
                                   f"segment exceeds {MAX_GIVEN_SEGMENT_M:g} m: centimetres?)")
     return seg
 

@@ -401,7 +401,7 @@ def _given_segments(segments_m):
     out = {}
     for k, v in segments_m.items():
         try:
-            x = float(v)
+            x = float("nan") if isinstance(v, bool) else float(v)  # true is no length (float() reads 1.0)
         except (TypeError, ValueError):
             x = float("nan")
         if not (np.isfinite(x) and x > 0):  # no upper bound: posterior draws may be absurd, not wrong input

@@ -98,6 +98,7 @@ def test_given_segment_lengths_are_checked_and_the_missing_ones_estimated(exact,
     assert res.segments_m["shank"] == pytest.approx(est["shank"]) and "hip_width" in res.segments_m
     assert lift(gt.cameras, j2, clip.fps, segments_m={"trunk": 3.3}).segments_m["trunk"] == 3.3  # a wild posterior draw
     for bad, msg in (({"thigh": -0.4}, "positive length"), ({"thigh": "long"}, "positive length"),
+                     ({"thigh": True}, "positive length"),  # float(True) is 1.0, not a length
                      ({"femur": 0.45}, "unknown segment")):
         with pytest.raises(ValueError, match=msg):
             lift(gt.cameras, j2, clip.fps, segments_m=bad)

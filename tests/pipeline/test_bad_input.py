@@ -466,7 +466,8 @@ def _lift(clip, tmp_path, cameras, *extra):
 
 @pytest.mark.parametrize("content, needle", [("[0.45, 0.43]", "expected an object of segment lengths"),
                                              ('{"thigh": 45, "shank": 43}', "'thigh' is 45 m long"),
-                                             ('{"segments_m": {"shank": 430}}', "centimetres?")])
+                                             ('{"segments_m": {"shank": 430}}', "centimetres?"),
+                                             ('{"thigh": "45"}', "'thigh' is 45 m long")])
 def test_segment_files_that_are_no_lengths_in_metres_are_clear_errors(clip, tmp_path, capsys, content, needle):
     (tmp_path / "seg.json").write_text(content)  # a list used to end in an AttributeError traceback
     assert _lift(clip, tmp_path, clip / "groundtruth" / "cameras.json", "--segments", str(tmp_path / "seg.json")) == 2
