@@ -122,8 +122,7 @@ REPORT_FIGURES_ELSEWHERE = ("angles", "gait_cycle", "decomposition")
 
 
 def _arviz():
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", FutureWarning)  # ArviZ announces its 1.0 refactor on import
+    with warnings.catch_warnings(action="ignore", category=FutureWarning):  # ArviZ announces its 1.0 refactor
         import arviz as az
     return az
 
@@ -419,8 +418,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     height = static_interval(np.exp(flat[:, 0]))  # calibrated 90 % interval (and the model's own)
     athlete = {f"{k}_m": static_interval(v) for k, v in {"stature": flat[:, 1], **model.lengths(flat)}.items()}
     lens_doc = _lens_summary(options, lens, flat)
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore", RuntimeWarning)
+    with warnings.catch_warnings(action="ignore", category=RuntimeWarning):
         pa, pn = prop["angles_point"], prop["angles"]
         ratio = bootstrap_noise_ratio(prop["angle_noise_point"], prop["angle_noise"])  # 1 without bootstrap noise
         summ = angle_bands(pa, pn, clip.fps, inflation=options.band_inflation, noise_ratio=ratio)
@@ -430,7 +428,9 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         cam_list = _as_list(model.cameras_at(height["median"]))
         diag["stance_slide"] = slide = stance_slide(cam_list, joints_med, clip.fps)  # do planted feet stand?
         diag["speed_scatter"] = spread = speed_scatter(joints_med, clip.fps, stride := model.stride_frames())
-        gait_s, gait_status, gait_reasons = gait_check(gait_s, stride, clip.fps, slide=slide, scatter=spread)
+        diag["track_off_heading"] = off = model.track_off_heading(height["median"])  # a track run backwards?
+        gait_s, gait_status, gait_reasons = gait_check(gait_s, stride, clip.fps, slide=slide, scatter=spread,
+                                                       off_heading=off)
         time_base = {**time_base_check(model.kp, clip.fps, joints_med[:, JOINT_INDEX["pelvis"], 2], stride,
                                        gait_s.get("speed_mps", {}).get("median"), model.raw),
                      "slow_motion": options.slow_motion}

@@ -92,6 +92,10 @@ def score_validation(clip_dir: Path, out_dir: Path):
         dist = np.linalg.norm(g.C[:2] - pel_true[i, :2])
         pos.append(100 * np.linalg.norm(C - g.C) / dist)
         side_ok.append(np.sign(c.C[1] - pel_true[i, 1]) == np.sign(g.C[1] - pel_true[i, 1]))
+    ang = read_angles_csv(out_dir / "angles.csv")
+    frames, med = ang["trunk_lean"][0].astype(int), ang["trunk_lean"][1]
+    lean_err = np.abs(med - joint_angles(gt.joints3d_track_m)["trunk_lean"][frames])
+    s["trunk_lean_deg"] = float(np.nanmean(lean_err)) if np.isfinite(lean_err).any() else float("nan")
     st_true = float(gt.athlete["stature_m"])
     st_med, st_lo, st_hi = _stature_interval(out_dir)
     run = json.loads((out_dir / "run.json").read_text())
@@ -394,6 +398,30 @@ def _targets(summary):
     ]
 
 
+OTHER_ANGLES_NOTE = (
+    "The issues' targets are set on the knee; the other angles of `angles.csv` are scored the same way "
+    "(posterior median against the truth, both sides, every frame; the share of frames inside the 90 % "
+    "band), so that an angle that fails while the knee does not is seen (0.2.0.dev20: a ground track run "
+    "backwards negated every hip angle and the trunk lean of the grazing clip heldout_9028 under an `ok` "
+    "verdict, knee 3.6 deg, hip 47.9 deg). No target in the issues.\n")
+
+
+def other_angle_rows(scores):
+    """Per scored clip: hip, elbow and trunk-lean errors and band coverage, and the verdict; a last
+    row with the means over the unflagged clips."""
+    rows, unflagged = [], []
+    for name, s in scores.items():
+        if s.get("failed") or s.get("uncalibrated"):
+            continue
+        rows.append([name, s["hip_deg"], 100 * s["hip_coverage"], s["elbow_deg"], 100 * s["elbow_coverage"],
+                     s["trunk_lean_deg"], s["verdict"]])
+        if s["verdict"] == "ok":
+            unflagged.append(rows[-1][1:6])
+    if unflagged:
+        rows.append([f"**mean, {len(unflagged)} unflagged**", *np.nanmean(np.array(unflagged, float), 0), ""])
+    return rows
+
+
 HEADER = ["clip", "knee err deg", "knee err, true camera deg", "peer knee err deg", "knee in 90 % band %",
           "camera height err %", "height in 90 %", "stature in 90 %", "camera side right", "camera position err %",
           "verdict (reasons), exit", "wall s"]
@@ -450,6 +478,9 @@ def _run_sets(rep, sets, only, keep=None):
         rep.add(f"### Targets (issue 25) on the {title.split(' (')[0]}\n")
         rep.add(md_table(["target", "wanted", "measured", "met"],
                          [[a, b, c, "yes" if d else "**no**"] for a, b, c, d in _targets(summary)]))
+        rep.add(f"### Hips, elbows and the trunk lean on the {title.split(' (')[0]}\n\n" + OTHER_ANGLES_NOTE)
+        rep.add(md_table(["clip", "hip err deg", "hip in 90 % band %", "elbow err deg", "elbow in 90 % band %",
+                          "trunk lean err deg", "verdict"], other_angle_rows(scores)))
         gt = gait_table(scores)
         if gt:
             rep.add(f"### Cadence by gait verdict on the {title.split(' (')[0]}\n\nThe gait verdict "

@@ -52,8 +52,15 @@ from __future__ import annotations
 import numpy as np
 
 __all__ = ["CADENCE_TOLERANCE", "CONTACT_NUMBERS", "RUNNING_CADENCE_SPM", "HALF_LAG_RATIO", "MAX_STANCE_BACKSLIDE",
-           "Z90", "gait_check", "pattern_cadence_spm", "pattern_stride_frames", "speed_scatter",
+           "MAX_OFF_HEADING", "Z90", "gait_check", "pattern_cadence_spm", "pattern_stride_frames", "speed_scatter",
            "stance_slide"]
+
+#: share of the frames whose ground track may head off the running direction (more than
+#: :data:`probreg.lifting.trajectory.MAX_HEADING_DEG` from the straight) before the track's
+#: velocity, and with it every gait number, is unreliable: a good track never does (its heading
+#: stays within a degree or two of the straight), one from contacts too few or too noisy to
+#: give a velocity (a low grazing view) runs backwards or sideways through much of the clip
+MAX_OFF_HEADING = 0.1
 
 #: steps per minute a runner makes in real time: a slow jog (~140) to the fastest sprinters
 #: (~5 steps/s), with margins; below it the motion is slowed (or it is a walk, which probreg's
@@ -246,7 +253,7 @@ def speed_scatter(joints_track_m, fps, stride_frames):
 Z90 = 1.6448536269514722
 
 
-def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE, slide=None, scatter=None):
+def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE, slide=None, scatter=None, off_heading=None):
     """The gait verdict: ``(gait, status, reasons)``, ``gait`` a copy of the summary
     ({name: {"median", "lo", "hi", "unit"}}) whose numbers carry ``"status"`` (``"ok"`` or
     ``"unreliable"``: the contact-based ones with any reason; ``speed_mps`` only with feet that slide).
@@ -256,7 +263,10 @@ def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE, slide=None
     ``slide`` is :func:`stance_slide`'s result: feet sliding back make every number unreliable,
     the speed too.  ``scatter`` is :func:`speed_scatter`'s result: the speed's 90 % interval is
     widened by its standard error (each side ``sqrt(side**2 + (1.645 se)**2)``; the posterior's
-    draws share every frame's pan, so their interval leaves that error out).
+    draws share every frame's pan, so their interval leaves that error out).  ``off_heading`` is
+    the share of frames whose ground track heads off the running direction
+    (:meth:`probreg.inference.ClipModel.track_off_heading`): above :data:`MAX_OFF_HEADING` the
+    track's velocity is not the athlete's, and every number, the speed too, is unreliable.
 
     >>> g = {"cadence_spm": {"median": 180.0}, "contact_time_s": {"median": 0.15}, "speed_mps": {"median": 6.0}}
     >>> gait_check(g, 33.3, 50.0)[1:]
@@ -271,6 +281,9 @@ def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE, slide=None
     (['feet slide back (stance ankles at -0.90 times the pelvis speed)'], 'unreliable')
     >>> gait_check({"cadence_spm": {"median": 1000.0}}, None, 200.0)[2]  # no stride pattern to compare with
     ["cadence 1000 steps/min from the contacts, outside a runner's (120-330)"]
+    >>> out, status, reasons = gait_check(g, 33.3, 50.0, off_heading=0.93)
+    >>> reasons, out["speed_mps"]["status"]
+    (['ground track off the running direction in 93 % of frames'], 'unreliable')
     >>> g["speed_mps"].update(lo=5.7, hi=6.4)
     >>> sp = gait_check(g, 33.3, 50.0, scatter={"se_mps": 0.4})[0]["speed_mps"]
     >>> round(sp["lo"], 2), round(sp["hi"], 2)
@@ -294,8 +307,12 @@ def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE, slide=None
     sliding = bool(np.isfinite(backslide) and backslide < -MAX_STANCE_BACKSLIDE)
     if sliding:
         reasons.append(f"feet slide back (stance ankles at {backslide:.2f} times the pelvis speed)")
+    off_track = off_heading is not None and np.isfinite(off_heading) and off_heading > MAX_OFF_HEADING
+    if off_track:
+        reasons.append(f"ground track off the running direction in {100 * off_heading:.0f} % of frames")
     status = "unreliable" if reasons else "ok"
-    out = {k: {**v, "status": status if k in CONTACT_NUMBERS or sliding else "ok"} for k, v in gait.items()}
+    out = {k: {**v, "status": status if k in CONTACT_NUMBERS or sliding or off_track else "ok"}
+           for k, v in gait.items()}
     se = float("nan") if not scatter else float(scatter.get("se_mps", float("nan")))
     sp = out.get("speed_mps")
     finite = sp is not None and all(np.isfinite(sp.get(k, np.nan)) for k in ("median", "lo", "hi"))

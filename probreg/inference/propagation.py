@@ -166,6 +166,16 @@ class DrawPropagation:
             self._stride_frames = pattern_stride_frames(self.kp, self.fps, self.stride_lag)
         return self._stride_frames
 
+    def track_off_heading(self, height_m):
+        """The share of the frames with a camera whose ground track (the point lifting's: the
+        clip's contacts under the cameras at ``height_m``) heads more than
+        :data:`probreg.lifting.trajectory.MAX_HEADING_DEG` from the straight's direction
+        (:meth:`probreg.lifting.GroundTrack.off_heading`); NaN without such frames."""
+        cams = self.cameras_at(height_m)
+        tcfg = camera_track_config(cams, self.kp[:, JOINT_INDEX["pelvis"], :2], self.noise_sd)
+        off = fit_ground_track(cams, self.kp, self.fps, contacts=self.contacts, config=tcfg).off_heading()[cams.valid]
+        return float(np.mean(off)) if off.size else float("nan")
+
     def bootstrap_copies(self, seeds, stop=None):
         """Re-noised copies of the cleaned keypoints, each cleaned again as the data were (the
         draw-independent half of the bootstrap), one per seed (:meth:`noise_copy_seeds`), in

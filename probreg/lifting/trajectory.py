@@ -98,6 +98,11 @@ def camera_track_config(cams, pelvis_px, noise_px):
                                       float(np.hypot(base.contact_std_m[1], across))))
 
 
+#: largest heading (deg) of a runner's track from the straight's direction ``+x``: a runner keeps to
+#: the lane (a lane change over a few strides, as when the 800 m breaks, turns the track by ~5-10 deg)
+MAX_HEADING_DEG = 20.0
+
+
 @dataclass(frozen=True)
 class GroundTrack:
     """The athlete's ground track (track frame, metres).
@@ -131,11 +136,33 @@ class GroundTrack:
 
     @property
     def forward(self):
-        """Unit running direction per frame, shape (F, 3) (horizontal)."""
+        """Unit running direction per frame, shape (F, 3) (horizontal): the track's heading, or
+        the straight's direction ``+x`` where the heading is more than :data:`MAX_HEADING_DEG` from
+        it (:meth:`off_heading`)."""
         v = self.velocity_mps
         n = np.linalg.norm(v, axis=1, keepdims=True)
         f = np.where(n > 1e-6, v / np.maximum(n, 1e-12), [1.0, 0.0])
+        f = np.where(self.off_heading()[:, None], [1.0, 0.0], f)
         return np.column_stack([f, np.zeros(len(f))])
+
+    def off_heading(self):
+        """Frames (F,) whose track heading is more than :data:`MAX_HEADING_DEG` from ``+x``.
+
+        The track frame's ``x`` is the running direction on the straight (``CLIP_FORMAT.md``), and
+        a runner keeps to the lane, so such a heading is the filter's, not the athlete's: a track
+        run backwards or sideways from contacts too few or too noisy to give its velocity (a
+        low grazing view, where a pixel moves a cast foot metres along the ray).  Reversed, the
+        running direction would turn every hip angle and the trunk lean into their negatives.
+
+        >>> nan = np.full((3, 4, 4), np.nan)
+        >>> tr = GroundTrack(np.zeros((3, 2)), np.array([[7.0, 0.2], [-9.0, 0.1], [0.5, 3.0]]), nan,
+        ...                  np.zeros((3, 2), bool), np.zeros((0, 4)), 0.0)
+        >>> tr.off_heading().tolist(), tr.forward[:, 0].round(3).tolist()
+        ([False, True, True], [1.0, 1.0, 1.0])
+        """
+        v = np.asarray(self.velocity_mps, float)
+        with np.errstate(invalid="ignore"):
+            return v[:, 0] < math.cos(math.radians(MAX_HEADING_DEG)) * np.hypot(v[:, 0], v[:, 1])
 
     @property
     def left(self):

@@ -358,6 +358,12 @@ def run_report(out_html, clip, result, joints_median, cameras, rendered=None):
                       "the track do not hold together from frame to frame (probreg.inference.gait_check). Their "
                       "bands do not cover this; the angles do not rest on the positions along the track.",
                       cls="warning")
+    elif any(r.startswith("ground track off") for r in gait_reasons):  # the track's velocity is not the athlete's
+        rep.paragraph("Every gait number, the speed included, is unreliable: " + "; ".join(gait_reasons)
+                      + ". The ground track from the feet in contact heads away from the straight's running "
+                      "direction: its contacts were too few or too noisy to give the athlete's velocity (in a low "
+                      "grazing view a pixel moves a foot cast onto the ground by metres along its ray). The angles "
+                      "take the straight's direction there (probreg.lifting.GroundTrack.forward).", cls="warning")
     elif gait_reasons:
         rep.paragraph("The gait numbers that rest on the detected ground contacts are unreliable: "
                       + "; ".join(gait_reasons) + " (probreg.inference.gait_check). Their bands do not "

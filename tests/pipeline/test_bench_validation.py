@@ -27,3 +27,19 @@ def test_true_camera_floor_is_zero_for_exact_keypoints_and_not_for_noisy(small_c
     shutil.copytree(small_clip, broken)
     (broken / "keypoints2d.json").write_text("{")
     assert np.isnan(_true_camera_knee(broken, tmp_path / "broken_work"))
+
+
+def test_other_angles_table_scores_every_clip_and_averages_the_unflagged():
+    """Hips, elbows and the trunk lean are reported next to the knee: a clip whose hips fail under an
+    ``ok`` verdict (the ground track run backwards of 0.2.0.dev20) shows in the unflagged mean."""
+    from probreg.bench.validation import other_angle_rows
+
+    def score(hip, verdict):
+        return {"hip_deg": hip, "hip_coverage": 0.9, "elbow_deg": 3.0, "elbow_coverage": 1.0,
+                "trunk_lean_deg": 1.0, "verdict": verdict}
+
+    rows = other_angle_rows({"a": score(2.0, "ok"), "b": score(48.0, "ok"), "c": score(9.0, "unreliable"),
+                             "d": {"failed": True}})
+    assert [r[0] for r in rows[:-1]] == ["a", "b", "c"]
+    assert rows[1][1:] == [48.0, 90.0, 3.0, 100.0, 1.0, "ok"]
+    assert rows[-1][0] == "**mean, 2 unflagged**" and rows[-1][1] == 25.0 and rows[-1][2] == 90.0
