@@ -240,8 +240,11 @@ def gait_intervals(gait_point, gait_noisy, lo=5.0, hi=95.0, inflation=None):
     :data:`GAIT_BAND_SCALE`).
 
     Numbers that cannot be negative (rates, lengths, speeds, times: names ending in
-    ``_spm``, ``_m``, ``_mps``, ``_s``) have their lower bound cut at zero; a widened
-    interval of a short, uncertain contact time once reached -0.013 s.
+    ``_spm``, ``_m``, ``_mps``, ``_s``) are cut at zero, the interval and the median: a widened
+    interval of a short, uncertain contact time once reached -0.013 s, and a flight time (the
+    step time less the contact time) came out at -3.26 s from contacts that lasted the whole
+    clip (a ground track run backwards, 0.2.0.dev20; its gait verdict ``unreliable``).  The
+    median always lies inside its interval.
 
     >>> g = gait_intervals({"cadence_spm": np.full(9, 170.0)},
     ...                    {"cadence_spm": 170.0 + np.linspace(-4.0, 4.0, 9)}, inflation=1.0)
@@ -251,6 +254,10 @@ def gait_intervals(gait_point, gait_noisy, lo=5.0, hi=95.0, inflation=None):
     ...                    {"contact_time_s": 0.05 + np.linspace(-0.04, 0.04, 9)}, inflation=2.0)
     >>> [round(float(x), 3) for x in g["contact_time_s"]]
     [0.05, 0.0, 0.122]
+    >>> g = gait_intervals({"flight_time_s": np.full(9, -3.26)},
+    ...                    {"flight_time_s": np.linspace(-3.3, 0.1, 9)}, inflation=1.0)
+    >>> [round(float(x), 3) for x in g["flight_time_s"]]
+    [0.0, 0.0, 0.0]
     """
     import warnings
 
@@ -262,10 +269,10 @@ def gait_intervals(gait_point, gait_noisy, lo=5.0, hi=95.0, inflation=None):
             med = float(np.nanmedian(v))
             w = np.asarray(gait_noisy.get(name, v), float)
             c = np.nanmedian(w)
-            low = med - k * (c - np.nanpercentile(w, lo))
-            if name.endswith(NONNEGATIVE_GAIT_SUFFIXES):
-                low = max(low, 0.0)
-            out[name] = (med, low, med + k * (np.nanpercentile(w, hi) - c))
+            low, high = med - k * (c - np.nanpercentile(w, lo)), med + k * (np.nanpercentile(w, hi) - c)
+            if name.endswith(NONNEGATIVE_GAIT_SUFFIXES):  # NaN stays NaN (max would turn it into 0)
+                med, low, high = (x if np.isnan(x) else max(x, 0.0) for x in (med, low, high))
+            out[name] = (med, low, high)
     return out
 
 

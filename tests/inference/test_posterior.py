@@ -177,6 +177,10 @@ def test_run_pipeline_writes_the_result_layout(small_clip, tmp_path):
     assert run["gait_verdict"] in ("ok", "unreliable")
     assert (run["gait_verdict"] == "ok") == (not run["gait_verdict_reasons"])
     assert gait["speed_mps"]["status"] == "ok" and gait["cadence_spm"]["status"] == run["gait_verdict"]
+    for name, g in gait.items():  # every median inside its interval, none of the non-negative ones below 0
+        if g["median"] is not None:
+            assert g["lo"] <= g["median"] <= g["hi"], name
+            assert name.endswith("_deg") or g["lo"] >= 0, name
     assert "cadence_stride_pattern_spm" in run["diagnostics"]  # NaN here: 40 frames hold no two strides
     terms = run["diagnostics"]["height_terms"]  # do the camera height's terms agree (inference.heights)
     assert {"conflict_nats", "threshold_nats", "temper", "peaks_m", "deficits_nats"} <= set(terms)
