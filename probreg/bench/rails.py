@@ -12,8 +12,10 @@ Each result is scored against the ground truth:
   ankle's 20th-percentile along-track speed over the pelvis's; a planted foot seen from a camera
   moving at ``f`` of the runner's speed gives ``-f / (1 - f)``) and the gait verdict;
 * the running speed of ``gait.json`` against the runner's true speed, the knee-angle error of
-  the posterior median, the stature and the camera height (at mid-clip for a moving camera)
-  against the truth, and the clip verdict.
+  the posterior median, the hip-angle and trunk-lean errors of ``angles.csv`` (since 0.2.0.dev20:
+  a camera as fast as the runner leaves the ground track no velocity, and until then it could
+  turn the running direction round and negate them), the stature and the camera height (at
+  mid-clip for a moving camera) against the truth, and the clip verdict.
 
 Static clips must not be flagged by it: the same is read from runs of the validation clips
 (``shared/data/validation``, an independent generator) and of the held-out set (40 clips), with
@@ -29,7 +31,9 @@ from pathlib import Path
 
 import numpy as np
 
+from ..geometry import joint_angles
 from ..io.clip import load_groundtruth
+from ..io.results import read_angles_csv
 from .common import BenchReport, md_table, verdict_text
 from .cuts import _run_kept, knee_errors
 from .validation import judge_dirs, real_time_clips
@@ -50,6 +54,7 @@ def score_rail(clip_dir: Path, out_dir: Path):
     gt = load_groundtruth(clip_dir)
     err = knee_errors(gt, out_dir)
     ok = np.isfinite(err)
+    other = _angle_errors(gt, out_dir, ("hip_l", "hip_r", "trunk_lean"))
     slide = (run.get("diagnostics") or {}).get("stance_slide") or {}
     speed = (gait.get("speed_mps") or {}).get("median")
     stature = ((run.get("athlete") or {}).get("stature_m") or {}).get("median")
@@ -64,18 +69,33 @@ def score_rail(clip_dir: Path, out_dir: Path):
             "gait_verdict": run.get("gait_verdict", "n/a"), "gait_reasons": reasons,
             "speed_err_pct": rel(speed, _true_speed(gt.athlete)),
             "knee_deg": float(np.mean(err[ok])) if ok.any() else np.nan,
+            "hip_deg": other[0] if other else np.nan, "trunk_lean_deg": other[1] if other else np.nan,
+            "track_off_heading": (run.get("diagnostics") or {}).get("track_off_heading"),
             "stature_err_pct": rel(stature, float(gt.athlete.get("stature_m", np.nan))),
             "height_err_pct": rel(height, true_h), "verdict": run.get("verdict", "n/a"),
             "reasons": run.get("verdict_reasons", [])}
 
 
+def _angle_errors(gt, out_dir, names):
+    """Mean absolute errors (deg) of the hips (both) and the trunk lean of ``angles.csv``'s
+    medians: ``(hip, trunk_lean)``, NaN where there is none; empty without ``angles.csv``."""
+    path = Path(out_dir) / "angles.csv"
+    if not path.exists():
+        return ()
+    ang, truth = read_angles_csv(path), joint_angles(gt.joints3d_track_m)
+    err = {k: np.abs(ang[k][1] - truth[k][ang[k][0].astype(int)]) for k in names}
+    hips = np.concatenate([err["hip_l"], err["hip_r"]])
+    return tuple(float(np.nanmean(e)) if np.isfinite(e).any() else float("nan") for e in (hips, err["trunk_lean"]))
+
+
 def _row(name, s, *lead):
     return [name, *lead, s["backslide"], verdict_text(s["gait_verdict"], s["gait_reasons"]), s["speed_err_pct"],
-            s["knee_deg"], s["stature_err_pct"], s["height_err_pct"], verdict_text(s["verdict"], s["reasons"])]
+            s["knee_deg"], s["hip_deg"], s["trunk_lean_deg"], s["stature_err_pct"], s["height_err_pct"],
+            verdict_text(s["verdict"], s["reasons"])]
 
 
-HEADER = ["feet slide (backslide)", "gait verdict (reasons)", "speed err %", "knee err deg", "stature err %",
-          "camera height err %", "clip verdict (reasons)"]
+HEADER = ["feet slide (backslide)", "gait verdict (reasons)", "speed err %", "knee err deg", "hip err deg",
+          "trunk lean err deg", "stature err %", "camera height err %", "clip verdict (reasons)"]
 
 
 def _mean_abs(v):
@@ -120,19 +140,19 @@ def run(args):
             summary.append([f"rail at {frac:g} of the runner's speed", f"{sum(s['sliding'] for s in ss)} of {len(ss)}",
                             float(np.nanmedian([s["backslide"] for s in ss])),
                             _mean_abs([s["speed_err_pct"] for s in ss]), _mean_abs([s["knee_deg"] for s in ss]),
-                            _mean_abs([s["stature_err_pct"] for s in ss]),
+                            _mean_abs([s["hip_deg"] for s in ss]), _mean_abs([s["stature_err_pct"] for s in ss]),
                             f"{sum(s['verdict'] != 'ok' for s in ss)} of {len(ss)}"])
         for label, group in (("static, feet-slide flagged", [s for _, s in static if s["sliding"]]),
                              ("static, not flagged by it", [s for _, s in static if not s["sliding"]])):
             summary.append([label, f"{len(group)} of {len(static)}",
                             float(np.nanmedian([s["backslide"] for s in group])) if group else float("nan"),
                             _mean_abs([s["speed_err_pct"] for s in group]), _mean_abs([s["knee_deg"] for s in group]),
-                            _mean_abs([s["stature_err_pct"] for s in group]),
+                            _mean_abs([s["hip_deg"] for s in group]), _mean_abs([s["stature_err_pct"] for s in group]),
                             f"{sum(s['verdict'] != 'ok' for s in group)} of {len(group)}"])
         flagged = [n for n, s in static if s["sliding"]]
         rep.add("## Summary\n\n" + md_table(
             ["clips", "flagged by the feet-slide check", "median backslide", "mean abs speed err %",
-             "mean knee err deg", "mean abs stature err %", "clip verdict not ok"], summary)
+             "mean knee err deg", "mean hip err deg", "mean abs stature err %", "clip verdict not ok"], summary)
             + ("\nStatic clips flagged: " + ", ".join(flagged) + ".\n" if flagged else ""))
         moving = [s for f, ss in by_frac.items() if f >= 0.5 for s in ss]
         rep.numbers.update({"rails_half_speed_or_more_flagged": sum(s["sliding"] for s in moving),
