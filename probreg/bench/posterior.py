@@ -56,6 +56,22 @@ def true_gait(clip_dir):
     return gait_summary(track, joint_angles(gt.joints3d_track_m), fps)
 
 
+def angle_error_deg(gt, out_dir, names):
+    """Mean absolute error (deg) of ``angles.csv``'s medians against the truth ``gt`` over the angles
+    ``names`` together (e.g. both hips), every frame; NaN where the result has none.
+
+    >>> import types
+    >>> angle_error_deg(types.SimpleNamespace(joints3d_track_m=np.zeros((0, 17, 3))), "/nonexistent", ("hip_l",))
+    nan
+    """
+    path = Path(out_dir) / "angles.csv"
+    if not path.exists():
+        return float("nan")
+    ang, truth = read_angles_csv(path), joint_angles(gt.joints3d_track_m)
+    err = np.concatenate([np.abs(ang[k][1] - truth[k][ang[k][0].astype(int)]) for k in names])
+    return float(np.nanmean(err)) if np.isfinite(err).any() else float("nan")
+
+
 def score_result(clip_dir, out_dir):
     """Errors and coverage of one result folder against the clip's ground truth."""
     gt = load_groundtruth(clip_dir)

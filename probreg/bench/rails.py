@@ -31,11 +31,10 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry import joint_angles
 from ..io.clip import load_groundtruth
-from ..io.results import read_angles_csv
 from .common import BenchReport, md_table, verdict_text
 from .cuts import _run_kept, knee_errors
+from .posterior import angle_error_deg
 from .validation import judge_dirs, real_time_clips
 
 __all__ = ["score_rail", "run"]
@@ -54,7 +53,6 @@ def score_rail(clip_dir: Path, out_dir: Path):
     gt = load_groundtruth(clip_dir)
     err = knee_errors(gt, out_dir)
     ok = np.isfinite(err)
-    other = _angle_errors(gt, out_dir, ("hip_l", "hip_r", "trunk_lean"))
     slide = (run.get("diagnostics") or {}).get("stance_slide") or {}
     speed = (gait.get("speed_mps") or {}).get("median")
     stature = ((run.get("athlete") or {}).get("stature_m") or {}).get("median")
@@ -69,23 +67,12 @@ def score_rail(clip_dir: Path, out_dir: Path):
             "gait_verdict": run.get("gait_verdict", "n/a"), "gait_reasons": reasons,
             "speed_err_pct": rel(speed, _true_speed(gt.athlete)),
             "knee_deg": float(np.mean(err[ok])) if ok.any() else np.nan,
-            "hip_deg": other[0] if other else np.nan, "trunk_lean_deg": other[1] if other else np.nan,
+            "hip_deg": angle_error_deg(gt, out_dir, ("hip_l", "hip_r")),
+            "trunk_lean_deg": angle_error_deg(gt, out_dir, ("trunk_lean",)),
             "track_off_heading": (run.get("diagnostics") or {}).get("track_off_heading"),
             "stature_err_pct": rel(stature, float(gt.athlete.get("stature_m", np.nan))),
             "height_err_pct": rel(height, true_h), "verdict": run.get("verdict", "n/a"),
             "reasons": run.get("verdict_reasons", [])}
-
-
-def _angle_errors(gt, out_dir, names):
-    """Mean absolute errors (deg) of the hips (both) and the trunk lean of ``angles.csv``'s
-    medians: ``(hip, trunk_lean)``, NaN where there is none; empty without ``angles.csv``."""
-    path = Path(out_dir) / "angles.csv"
-    if not path.exists():
-        return ()
-    ang, truth = read_angles_csv(path), joint_angles(gt.joints3d_track_m)
-    err = {k: np.abs(ang[k][1] - truth[k][ang[k][0].astype(int)]) for k in names}
-    hips = np.concatenate([err["hip_l"], err["hip_r"]])
-    return tuple(float(np.nanmean(e)) if np.isfinite(e).any() else float("nan") for e in (hips, err["trunk_lean"]))
 
 
 def _row(name, s, *lead):

@@ -43,7 +43,7 @@ from ..io.clip import load_groundtruth, read_cameras_json
 from ..inference.gait_check import Z90
 from ..io.results import read_angles_csv
 from .common import BenchReport, find_shared_data, md_table
-from .posterior import score_result, true_gait
+from .posterior import angle_error_deg, score_result, true_gait
 
 __all__ = ["run", "score_validation", "peer_knee_errors", "speed_line", "gait_coverage_table", "GAIT_NUMBERS"]
 
@@ -92,10 +92,7 @@ def score_validation(clip_dir: Path, out_dir: Path):
         dist = np.linalg.norm(g.C[:2] - pel_true[i, :2])
         pos.append(100 * np.linalg.norm(C - g.C) / dist)
         side_ok.append(np.sign(c.C[1] - pel_true[i, 1]) == np.sign(g.C[1] - pel_true[i, 1]))
-    ang = read_angles_csv(out_dir / "angles.csv")
-    frames, med = ang["trunk_lean"][0].astype(int), ang["trunk_lean"][1]
-    lean_err = np.abs(med - joint_angles(gt.joints3d_track_m)["trunk_lean"][frames])
-    s["trunk_lean_deg"] = float(np.nanmean(lean_err)) if np.isfinite(lean_err).any() else float("nan")
+    s["trunk_lean_deg"] = angle_error_deg(gt, out_dir, ("trunk_lean",))
     st_true = float(gt.athlete["stature_m"])
     st_med, st_lo, st_hi = _stature_interval(out_dir)
     run = json.loads((out_dir / "run.json").read_text())
