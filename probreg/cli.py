@@ -596,10 +596,10 @@ def build_parser():
     b.add_argument("--only", default=None, help="comma-separated clip names ('bench validation')")
     b.add_argument("--set", dest="clip_set", choices=("validation", "heldout", "all"), default="all",
                    help="'bench validation': the shared validation clips, the held-out set, or both")
-    b.add_argument("--heldout-dir", type=Path, default=None,
-                   help="'bench validation': reuse (or write) the held-out clips there")
-    b.add_argument("--keep-outputs", type=Path, default=None,
-                   help="'bench validation': keep every run's result folder there (DIR/<clip>)")
+    b.add_argument("--heldout-dir", type=Path, help="'bench validation': reuse (or write) the held-out clips there")
+    b.add_argument("--keep-outputs", type=Path, help="'bench validation': keep each run's result folder (DIR/<clip>)")
+    b.add_argument("--reseed", type=int, default=None,
+                   help="'bench validation': run every clip again with this seed and report how far the results move")
     b.set_defaults(func=_cmd_bench)
     return p
 

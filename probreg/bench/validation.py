@@ -21,6 +21,10 @@ ground truth:
   camera-athlete distance;
 * the clip verdict of ``run.json`` with its reasons, the exit code and the wall time.
 
+With ``--reseed N`` every clip runs a second time with ``--seed N``, and a table per set shows
+how far the results move with the seed alone (the sampler's and the bootstrap's random numbers):
+the knee error, its band's coverage, the camera height and the verdict.
+
 The same is done on the held-out set (:mod:`probreg.sim.heldout`: 40 randomised set-ups of
 probreg's own generator over the set-ups real broadcasts have, seeds fixed before any tuning;
 ``--set heldout``).  Both sets check; they are never used to fit anything.
@@ -34,6 +38,7 @@ import subprocess
 import sys
 import tempfile
 import time
+import warnings
 from pathlib import Path
 
 import numpy as np
@@ -45,7 +50,8 @@ from ..io.results import read_angles_csv
 from .common import BenchReport, find_shared_data, md_table
 from .posterior import angle_error_deg, score_result, true_gait
 
-__all__ = ["run", "score_validation", "peer_knee_errors", "speed_line", "gait_coverage_table", "GAIT_NUMBERS"]
+__all__ = ["run", "score_validation", "peer_knee_errors", "speed_line", "gait_coverage_table", "GAIT_NUMBERS",
+           "seed_rows"]
 
 
 def peer_knee_errors(readme: Path):
@@ -207,9 +213,9 @@ def gait_coverage_table(scores):
     return rows
 
 
-def _run_cli(clip: Path, out: Path, extra=()):
+def _run_cli(clip: Path, out: Path, extra=(), seed=0):
     """``probreg run`` in a fresh process; returns (exit code, wall s, last stderr line)."""
-    cmd = [sys.executable, "-m", "probreg", "run", str(clip), "--out", str(out), "--seed", "0", *extra]
+    cmd = [sys.executable, "-m", "probreg", "run", str(clip), "--out", str(out), "--seed", str(int(seed)), *extra]
     t0 = time.perf_counter()
     proc = subprocess.run(cmd, capture_output=True, text=True)
     dt = time.perf_counter() - t0
@@ -306,6 +312,66 @@ def _score_set(clips, peer, tmp):
                      "yes" if s["side_ok"] else "**no**", s["position_pct"],
                      f"{s['verdict']}" + (f" ({reasons})" if reasons else "") + f", exit {code}", dt])
     return rows, scores
+
+
+def _reseed_scores(clips, where, seed):
+    """Every clip run again with ``--seed seed`` into ``where/<clip>`` and scored (no true-camera
+    lifting); a run without a result is ``{"failed": True}``, one that calibrated nothing
+    ``{"uncalibrated": True}``."""
+    Path(where).mkdir(parents=True, exist_ok=True)
+    out = {}
+    for clip in clips:
+        res = Path(where) / clip.name
+        code, dt, last = _run_cli(clip, res, seed=seed)
+        run = json.loads((res / "run.json").read_text()) if (res / "run.json").exists() else None
+        if run is None or not (res / "angles.csv").exists():
+            out[clip.name] = {"failed": True, "verdict": f"failed (exit {code}: {last})"}
+        elif run.get("verdict") == "uncalibrated" and not (res / "posterior.nc").exists():
+            out[clip.name] = {"uncalibrated": True, "verdict": "uncalibrated"}
+        else:
+            out[clip.name] = {**score_validation(clip, res), "exit": code, "time_s": dt}
+    return out
+
+
+def _unflagged_knee(scores):
+    """``(mean knee error of the unflagged clips, their number)``."""
+    knees = [s["knee_deg"] for s in scores.values() if not s.get("failed") and not s.get("uncalibrated")
+             and s["verdict"] == "ok"]
+    return (float(np.mean(knees)) if knees else float("nan")), len(knees)
+
+
+def seed_rows(first, second):
+    """Per clip scored under two seeds: knee error, knee band coverage (%), camera height error (%)
+    under each and the verdicts, then a row with the largest changes; and how many verdicts changed.
+    A clip without a score (failed, uncalibrated) has NaN numbers and its state as the verdict.
+
+    >>> a = {"c1": {"knee_deg": 3.0, "knee_coverage": 0.9, "height_pct": 5.0, "verdict": "ok"},
+    ...      "c2": {"knee_deg": 6.0, "knee_coverage": 0.7, "height_pct": 9.0, "verdict": "unreliable"}}
+    >>> b = {"c1": {"knee_deg": 3.5, "knee_coverage": 0.8, "height_pct": 4.0, "verdict": "unreliable"},
+    ...      "c2": {"knee_deg": 6.1, "knee_coverage": 0.7, "height_pct": 9.0, "verdict": "unreliable"}}
+    >>> rows, changed = seed_rows(a, b)
+    >>> rows[0][-1], rows[1][-1], changed
+    ('**ok -> unreliable**', 'unreliable', 1)
+    >>> [round(float(v), 2) for v in rows[-1][1:7:2]]  # largest changes: knee, coverage, height
+    [0.5, 10.0, 1.0]
+    """
+    rows, deltas, changed = [], [], 0
+    for name, s in first.items():
+        t = second.get(name, {"failed": True, "verdict": "not run"})
+        vals = []
+        for sc in (s, t):
+            scored = not sc.get("failed") and not sc.get("uncalibrated")
+            vals.append([sc[k] * f if scored else float("nan") for k, f in
+                         (("knee_deg", 1), ("knee_coverage", 100), ("height_pct", 1))])
+        same = s.get("verdict") == t.get("verdict")
+        changed += not same
+        verdict = s.get("verdict") if same else f"**{s.get('verdict')} -> {t.get('verdict')}**"
+        rows.append([name, vals[0][0], vals[1][0], vals[0][1], vals[1][1], vals[0][2], vals[1][2], verdict])
+        deltas.append(np.abs(np.subtract(vals[1], vals[0])))
+    with warnings.catch_warnings(action="ignore", category=RuntimeWarning):  # a column of NaN only
+        big = np.nanmax(np.array(deltas, float), 0) if deltas else np.full(3, np.nan)
+    rows.append(["**largest change**", big[0], "", big[1], "", big[2], "", f"{changed} of {len(rows)} changed"])
+    return rows, changed
 
 
 def _summary(scores, peer):
@@ -444,14 +510,15 @@ def run(args=None):
             sets.append(("held-out set (probreg's generator, 40 randomised set-ups, seeds fixed before tuning; "
                          "100 frames each; no peer numbers)", {},
                          _heldout_clips(getattr(args, "heldout_dir", None) or scratch)))
-        _run_sets(rep, sets, only, getattr(args, "keep_outputs", None))
+        _run_sets(rep, sets, only, getattr(args, "keep_outputs", None), getattr(args, "reseed", None))
     return rep
 
 
-def _run_sets(rep, sets, only, keep=None):
+def _run_sets(rep, sets, only, keep=None, reseed=None):
     """Run and score every set; ``keep``: a folder that receives every run's result folder
     (``keep/<clip>``; none of them may exist yet: an old result would be scored as new), else
-    they go to a temporary folder."""
+    they go to a temporary folder.  ``reseed``: a second seed every clip also runs with
+    (``keep/seed<N>/<clip>``), for the seed-stability table."""
     for title, peer, clips in sets:
         if only:
             clips = [c for c in clips if c.name in set(only.split(","))]
@@ -459,15 +526,19 @@ def _run_sets(rep, sets, only, keep=None):
             continue
         if keep is not None:
             # each clip's result folder and its true-camera lifting's work folder
-            there = [c.name for c in clips if any((Path(keep) / n).exists() for n in (c.name, f"{c.name}.true_camera"))]
+            names = (lambda c: (c.name, f"{c.name}.true_camera", f"seed{reseed}/{c.name}")) if reseed is not None \
+                else (lambda c: (c.name, f"{c.name}.true_camera"))
+            there = [c.name for c in clips if any((Path(keep) / n).exists() for n in names(c))]
             if there:
                 raise ValueError(f"{keep}: result folders already there ({', '.join(there[:3])}"
                                  f"{', ...' if len(there) > 3 else ''}); give an empty or new folder")
             Path(keep).mkdir(parents=True, exist_ok=True)
             rows, scores = _score_set(clips, peer, keep)
+            again = None if reseed is None else _reseed_scores(clips, Path(keep) / f"seed{reseed}", reseed)
         else:
             with tempfile.TemporaryDirectory() as tmp:
                 rows, scores = _score_set(clips, peer, tmp)
+                again = None if reseed is None else _reseed_scores(clips, Path(tmp) / f"seed{reseed}", reseed)
         summary = _summary(scores, peer)
         rep.numbers[title] = summary
         rep.add(f"## {title[0].upper() + title[1:]}: per clip\n")
@@ -494,3 +565,12 @@ def _run_sets(rep, sets, only, keep=None):
                     "knee angles; `probreg.bench.posterior.true_gait`), by gait verdict; no target in the issues:\n")
             rep.add(md_table(["gait number", "holding the truth, gait verdict ok", "gait verdict unreliable", "all"],
                              gait_coverage_table(scores)))
+        if again is not None:
+            rows_s, changed = seed_rows(scores, again)
+            means = [_unflagged_knee(sc) for sc in (scores, again)]
+            rep.add(f"### Seed stability on the {title.split(' (')[0]}\n\nEvery clip run again with `--seed {reseed}` "
+                    f"(`--reseed {reseed}`; the first run's seed is 0): verdicts that changed: **{changed} of "
+                    f"{len(rows_s) - 1}**; unflagged clips' mean knee error {means[0][0]:.2f} deg over {means[0][1]} "
+                    f"clips (seed 0), {means[1][0]:.2f} deg over {means[1][1]} (seed {reseed}).\n")
+            rep.add(md_table(["clip", "knee err deg, seed 0", f"seed {reseed}", "knee in 90 % band %, seed 0",
+                              f"seed {reseed}", "camera height err %, seed 0", f"seed {reseed}", "verdict"], rows_s))

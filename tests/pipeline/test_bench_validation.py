@@ -43,3 +43,25 @@ def test_other_angles_table_scores_every_clip_and_averages_the_unflagged():
     assert [r[0] for r in rows[:-1]] == ["a", "b", "c"]
     assert rows[1][1:] == [48.0, 90.0, 3.0, 100.0, 1.0, "ok"]
     assert rows[-1][0] == "**mean, 2 unflagged**" and rows[-1][1] == 25.0 and rows[-1][2] == 90.0
+
+
+def test_reseed_with_the_same_seed_reproduces_every_number(small_clip, tmp_path):
+    """``bench validation --reseed``: a second run of every clip; with the first run's own seed it must
+    reproduce every score exactly (a run is a function of its inputs and its seed), and a result
+    folder already in ``--keep-outputs`` is refused, not scored as new."""
+    import pytest
+
+    from probreg.bench.common import BenchReport
+    from probreg.bench.validation import _run_sets
+
+    rep = BenchReport("validation", "test")
+    keep = tmp_path / "keep"
+    _run_sets(rep, [("test set (one clip)", {}, [small_clip])], None, keep, reseed=0)
+    text = "\n".join(rep.sections)
+    assert "### Seed stability on the test set" in text
+    assert "verdicts that changed: **0 of 1**" in text
+    row = [ln for ln in text.splitlines() if ln.startswith("| **largest change**")][0]
+    assert row.split("|")[2:8:2] == [" 0.00 ", " 0.00 ", " 0.00 "]
+    assert (keep / "seed0" / small_clip.name / "run.json").exists()
+    with pytest.raises(ValueError, match="already there"):
+        _run_sets(BenchReport("validation", "again"), [("test set", {}, [small_clip])], None, keep, reseed=0)
