@@ -10,8 +10,9 @@ but their family leaves the clip's zoom path, so it is treated like a frame with
 ``bridged_no_member`` (lanes found, but their family has no member at the clip's camera
 height, e.g. a misdetected line; bridged likewise); ``inconsistent`` and ``no_member`` (the
 same two cases at the clip's start or end, where there is nothing to bridge from: no camera);
-``missing_image`` (the clip has no image file for this frame: no camera) and
-``bridged_missing_image`` (likewise, camera interpolated from its neighbours);
+``missing_image`` (the clip has no image file for this frame: no camera), ``bad_image`` (its image
+does not decode, or has another size) and ``bridged_missing_image``, ``bridged_bad_image`` (likewise,
+camera interpolated from its neighbours);
 otherwise the lane status of the frame, e.g. ``too_few_lines``, ``no_straight``).
 
 ``run.json`` also holds the clip ``verdict`` (``"ok"``, ``"unreliable"`` or ``"uncalibrated"``,
@@ -33,7 +34,7 @@ import numpy as np
 
 from .analysis import GAIT_FIELDS
 from .calibration.lens import LensPrior, lens_registration
-from .calibration.registration import camera_json, register_clip, wrong_size_note
+from .calibration.registration import camera_json, left_out_notes, register_clip
 from .calibration.side import requested_side
 from .filtering import detection_status
 from .geometry import JOINT_INDEX, JOINT_NAMES
@@ -172,8 +173,7 @@ def _diagnostics(sampler, tau, idata, names=PARAM_NAMES):
         "steps": int(sampler.iteration), "walkers": int(sampler.nwalkers),
         "steps_per_tau": float(sampler.iteration / np.max(tau)) if np.all(np.isfinite(tau)) else float("nan"),
         "ess_height": float(ess["log_height"]), "ess_stature": float(ess["stature"]),
-        "rhat_height": float(rhat["log_height"]), "rhat_stature": float(rhat["stature"]),
-    }
+        "rhat_height": float(rhat["log_height"]), "rhat_stature": float(rhat["stature"])}
 
 
 #: how ``run.json``'s ``band_decomposition`` is computed (written beside it)
@@ -197,8 +197,8 @@ def _lens_summary(options, lens, flat):
 
 def _frame_status(lanes, camera, inconsistent, gap_distance):
     """The ``run.json`` status of one frame (see the module docstring)."""
-    if lanes.status == "missing_image":
-        return "missing_image" if camera is None else "bridged_missing_image"
+    if lanes.status in ("missing_image", "bad_image"):  # no image file, or one that does not decode
+        return lanes.status if camera is None else f"bridged_{lanes.status}"
     if camera is None:
         if not lanes.ok:
             return lanes.status
@@ -383,7 +383,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     if reg.shots.split:  # one static camera per shot: the other shots' frames are left out, and said so
         clip = restrict_clip(clip, reg.shots)
         log(f"warning: {clip.notes[-1]}")
-    if (note := wrong_size_note(reg)) is not None:  # frames of another size are left out, and said so
+    for note in left_out_notes(reg):  # frames of another size or that do not decode are left out, and said so
         log(f"warning: {note}")
         clip = replace(clip, notes=(*clip.notes, note))
     for thread in warm:

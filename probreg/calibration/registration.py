@@ -29,7 +29,7 @@ from .side import camera_side_evidence, forward_px_of
 from .family import CalibrationError, CalibrationFamily, SequenceCalibration
 
 __all__ = ["DEFAULT_HEIGHT_M", "ANKLE_HEIGHT_M", "ClipRegistration", "athlete_ground_track", "lane_anchor_shift",
-           "register_frames", "register_clip", "undistorted_members", "wrong_size_note"]
+           "register_frames", "register_clip", "undistorted_members", "left_out_notes"]
 
 
 #: Height used when none is given and no posterior is available: the median of
@@ -523,22 +523,30 @@ def _track_sized(frames, image_size, config, keypoints_px, warmup=0):
             for fl in fls]
 
 
-def wrong_size_note(reg: ClipRegistration):
-    """The input note about frames whose image size is not the clip's (None when there are none).
+def left_out_notes(reg: ClipRegistration):
+    """The input notes about frames left out of the lane step (status ``bad_image``): images whose
+    size is not the clip's, and images that do not decode (a damaged file, a video frame).
 
     >>> from probreg.lanes import FrameLanes
     >>> fls = [FrameLanes(status="bad_image", frame=3, extra={"image_size_px": [960, 540]}),
-    ...        FrameLanes(status="no_lines", frame=4)]
-    >>> reg = ClipRegistration(fls, None, np.array([1.0, 0.0]), (1920, 1080))
-    >>> wrong_size_note(reg)
-    '1 frame(s) not 1920x1080 like the clip (first: frame 3, 960x540): left out of the lane step'
+    ...        FrameLanes(status="no_lines", frame=4), FrameLanes(status="bad_image", frame=5)]
+    >>> for note in left_out_notes(ClipRegistration(fls, None, np.array([1.0, 0.0]), (1920, 1080))):
+    ...     print(note)
+    1 frame(s) not 1920x1080 like the clip (first: frame 3, 960x540): left out of the lane step
+    1 frame image(s) could not be decoded (first: frame 5): no lanes there, status bad_image or bridged_bad_image
     """
-    wrong = [fl for fl in reg.frame_lanes if "image_size_px" in fl.extra]
-    if not wrong:
-        return None
-    w, h = reg.image_size
-    return (f"{len(wrong)} frame(s) not {w}x{h} like the clip (first: frame {wrong[0].frame}, "
-            f"{wrong[0].extra['image_size_px'][0]}x{wrong[0].extra['image_size_px'][1]}): left out of the lane step")
+    bad = [fl for fl in reg.frame_lanes if fl.status == "bad_image"]
+    wrong = [fl for fl in bad if "image_size_px" in fl.extra]
+    broken = [fl.frame for fl in bad if "image_size_px" not in fl.extra]
+    (w, h), notes = reg.image_size, []
+    if wrong:
+        notes.append(f"{len(wrong)} frame(s) not {w}x{h} like the clip (first: frame {wrong[0].frame}, "
+                     f"{wrong[0].extra['image_size_px'][0]}x{wrong[0].extra['image_size_px'][1]}): left out of the "
+                     "lane step")
+    if broken:
+        notes.append(f"{len(broken)} frame image(s) could not be decoded (first: frame {broken[0]}): no lanes there, "
+                     "status bad_image or bridged_bad_image")
+    return notes
 
 
 def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(), smooth=True,

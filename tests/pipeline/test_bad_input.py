@@ -193,6 +193,7 @@ def test_run_end_to_end_with_missing_image_stray_file_and_absurd_keypoint(clip, 
     shutil.copy(clip / "frames" / "000007.jpg", clip / "frames" / "Thumbs.jpg")
     half = cv2.imread(str(clip / "frames" / "000030.jpg"))  # one frame of another size: its lines are in other pixels
     cv2.imwrite(str(clip / "frames" / "000030.jpg"), cv2.resize(half, (half.shape[1] // 2, half.shape[0] // 2)))
+    (clip / "frames" / "000033.jpg").write_bytes(b"\xff\xd8 a damaged JPEG")  # one frame that does not decode
     doc = json.loads((clip / "keypoints2d.json").read_text())
     doc["frames"][12]["keypoints"][2][0] = 1e10
     for i in (26, 27, 36, 37, 38, 39):  # no athlete: a short gap, and the clip's last four frames
@@ -210,9 +211,13 @@ def test_run_end_to_end_with_missing_image_stray_file_and_absurd_keypoint(clip, 
     assert run["frame_status"][19] == "ok" and run["frame_status"][21] == "ok"
     assert run["keypoints_outside_image"][12] == 1 and sum(run["keypoints_outside_image"]) == 1
     assert any("Thumbs.jpg" in n for n in run["input_notes"])
-    assert run["frame_status"][30] in ("bad_image", "bridged")  # left out of the lane step, not measured
+    assert run["frame_status"][30] in ("bad_image", "bridged_bad_image")  # left out of the lane step, not measured
     assert any(n.startswith("1 frame(s) not") and "frame 30" in n for n in run["input_notes"])
     assert "frame 30" in err.out
+    # a damaged image: its own status and note (it had passed as an ordinary frame without lanes)
+    assert run["frame_status"][33] in ("bad_image", "bridged_bad_image")
+    assert any("1 frame image(s) could not be decoded (first: frame 33)" in n for n in run["input_notes"])
+    assert "could not be decoded" in err.out
     assert any("no detected joint in 6 of 40 frames (first: frame 26)" in n for n in run["input_notes"])
     assert (out / "report.html").exists() and (out / "angles.csv").exists()
     # why a frame has no angles: its keypoints' status, consistent with angles.csv
