@@ -307,25 +307,23 @@ def _parse_floats(text, n, name):
 
 
 def _cmd_detect(args):
-    from .detect import detect_sequence, load_pose_model
-    from .geometry import coco_to_h36m
-    from .io.clip import load_clip, write_keypoints_json
-    from .io.frames import has_frames, iter_frames
+    from .io.clip import load_clip, write_keypoints_json, written_by_detect
+    from .io.frames import has_frames
+    from .io.output import check_file_output, write_file_output
+    from .pipeline import detect_athlete
 
     clip = load_clip(args.clip)
     if not has_frames(clip):
         raise CliError(f"{args.clip}: no frames/ folder or video.mp4 to run the pose model on")
-    model = load_pose_model(args.model)
-    detector = load_pose_model(args.det_model) if args.det_model else None
-    box = _parse_floats(args.box, 4, "--box")
-    point = _parse_floats(args.point, 2, "--point")
-    if model.needs_box and detector is None and box is None:
-        raise CliError("a top-down model needs --det-model (a YOLO-pose model) or --box x0,y0,x1,y1")
-    coco = detect_sequence(iter_frames(clip), model, detector, box=box, point=point, min_score=args.min_score)
     out = Path(args.out) if args.out else Path(args.clip) / "keypoints2d.json"
-    write_keypoints_json(out, coco_to_h36m(coco))
-    found = int(np.sum(np.isfinite(coco[:, 0, 0]) | np.isfinite(coco[:, 11, 0])))
-    print(f"athlete found in {found}/{len(coco)} frames -> {out}")
+    # before the model runs: keypoints probreg detect did not write (another detector's, hand-labelled) stay
+    plan = check_file_output(out, written_by_detect, overwrite=args.overwrite)
+    box, point = _parse_floats(args.box, 4, "--box"), _parse_floats(args.point, 2, "--point")
+    kp = detect_athlete(clip, args.model, args.det_model, athlete=box or point, min_score=args.min_score)
+    aside = write_file_output(out, lambda tmp: write_keypoints_json(tmp, kp, written_by="probreg detect"), plan,
+                              written_by_detect)
+    found = int(np.sum(np.isfinite(kp[..., 0]).any(axis=1)))
+    print(f"athlete found in {found}/{len(kp)} frames -> {out}" + (f" (the one before: {aside})" if aside else ""))
     return 0
 
 
@@ -564,6 +562,7 @@ def build_parser():
     de.add_argument("--box", default=None, help="athlete's box in the first frame x0,y0,x1,y1")
     de.add_argument("--point", default=None, help="a point on the athlete in the first frame x,y")
     de.add_argument("--min-score", type=float, default=0.3)
+    de.add_argument("--overwrite", action="store_true", help="move an --out file probreg did not write aside")
     de.set_defaults(func=_cmd_detect)
 
     mo = sub.add_parser("models", help="offline model helpers")

@@ -589,7 +589,7 @@ def detect_athlete(clip, model_path, det_model=None, athlete=None, min_score=0.3
             raise ValueError(f"--athlete takes x,y (a point on the athlete) or x0,y0,x1,y1 (their box), got {athlete}")
     if model.needs_box and detector is None and box is None:
         raise ValueError(f"{model_path} is a top-down model: it needs --det-model (a YOLO-pose model that finds "
-                         f"the person) or --athlete x0,y0,x1,y1 (the athlete's box in the first frame)")
+                         f"the person) or the athlete's box in the first frame (run: --athlete, detect: --box)")
     frames = iter_frames_counted(clip, progress, "detection")
     try:
         coco = detect_sequence(frames, model, detector, box=box, point=point, min_score=min_score)

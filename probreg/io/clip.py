@@ -28,6 +28,7 @@ __all__ = [
     "read_keypoints_json",
     "read_segments_json",
     "write_keypoints_json",
+    "written_by_detect",
     "read_cameras_json",
     "write_json",
     "atomic_output_dir",
@@ -273,8 +274,9 @@ def read_keypoints_json(path, n_frames=None):
     return out
 
 
-def write_keypoints_json(path, keypoints_px, fmt="h36m17"):
-    """Write ``(F, 17, 3)`` keypoints; an all-NaN frame is written as ``null``."""
+def write_keypoints_json(path, keypoints_px, fmt="h36m17", written_by=None):
+    """Write ``(F, 17, 3)`` keypoints; an all-NaN frame is written as ``null``.  ``written_by``
+    (e.g. ``"probreg detect"``), when given, is stored as a key of that name (readers ignore it)."""
     kp = np.asarray(keypoints_px, float)
     frames = []
     for i, k in enumerate(kp):
@@ -283,7 +285,17 @@ def write_keypoints_json(path, keypoints_px, fmt="h36m17"):
         else:
             frames.append({"frame": i, "keypoints": [[None if not np.isfinite(v) else round(float(v), 4)
                                                       for v in row] for row in k]})
-    write_json(path, {"format": fmt, "joint_names": list(JOINT_NAMES), "frames": frames})
+    write_json(path, {"format": fmt, "joint_names": list(JOINT_NAMES), "frames": frames,
+                      **({"written_by": written_by} if written_by else {})})
+
+
+def written_by_detect(path):
+    """Whether ``path`` is a keypoints file ``probreg detect`` wrote (it may replace it)."""
+    try:
+        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+    except (OSError, ValueError):
+        return False
+    return isinstance(doc, dict) and str(doc.get("written_by", "")).startswith("probreg detect")
 
 
 #: frame rates a clip may have (frames per second)

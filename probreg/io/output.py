@@ -16,6 +16,11 @@ marker file, ``.probreg``, that lists the files probreg wrote.  The rules:
   ``.probreg-incomplete`` marker whose process is gone) are removed on the next start;
 * an interrupted run (Ctrl-C, an error) removes its own temporary and leaves the previous
   result as it was.
+
+A single output file (``probreg detect``'s keypoints, by default the clip's own
+``keypoints2d.json``) follows the same rules (:func:`check_file_output`, :func:`write_file_output`):
+a file probreg wrote is replaced, any other is refused, or with ``overwrite`` moved aside to
+``FILE.previous-<time>``; the new file is written under a temporary name and renamed into place.
 """
 
 from __future__ import annotations
@@ -27,7 +32,8 @@ import tempfile
 import time
 from pathlib import Path
 
-__all__ = ["MARKER", "atomic_output_dir", "prepare_output", "OutputRefused"]
+__all__ = ["MARKER", "atomic_output_dir", "prepare_output", "OutputRefused", "check_file_output",
+           "write_file_output"]
 
 #: name of the marker file of every folder probreg writes
 MARKER = ".probreg"
@@ -243,3 +249,62 @@ class atomic_output_dir:
                 t.rmdir()  # empty
             os.replace(self.tmp, t)
         return False
+
+
+def check_file_output(path, is_ours, overwrite=False):
+    """Before any work: may the single output file ``path`` be written?
+
+    Returns ``"new"`` (nothing there), ``"replace"`` (a file ``is_ours(path)`` says probreg wrote)
+    or ``"move_aside"`` (another file, and ``overwrite``).
+
+    Raises
+    ------
+    OutputRefused
+        If ``path`` is a folder, or a file probreg did not write and not ``overwrite``.
+    """
+    p = Path(path).expanduser()
+    if p.is_dir():
+        raise OutputRefused(f"{p}: is a folder; give the output file's name")
+    if not p.exists():
+        return "new"
+    if is_ours(p):
+        return "replace"
+    if overwrite:
+        return "move_aside"
+    raise OutputRefused(f"{p}: exists and was not written by probreg (use --overwrite to move it aside to "
+                        f"{p.name}.previous-<time>, or choose another --out)")
+
+
+def write_file_output(path, write, plan, is_ours):
+    """Write the single output file ``path``: ``write(tmp)`` fills a temporary file beside it, which
+    is renamed into place.  ``plan`` is :func:`check_file_output`'s answer; a file that appeared at
+    ``path`` since, and is not ours, is refused as there (unless the plan moves it aside).  Returns
+    the path the previous file was moved to, or None.
+
+    >>> import tempfile
+    >>> d = Path(tempfile.mkdtemp())
+    >>> (d / "kp.json").write_text("mine")
+    4
+    >>> ours = lambda p: p.read_text() == "probreg"
+    >>> aside = write_file_output(d / "kp.json", lambda t: t.write_text("probreg"),
+    ...                           check_file_output(d / "kp.json", ours, overwrite=True), ours)
+    >>> (d / "kp.json").read_text(), aside.read_text(), aside.name.startswith("kp.json.previous-")
+    ('probreg', 'mine', True)
+    """
+    p = Path(path).expanduser()
+    p.parent.mkdir(parents=True, exist_ok=True)
+    tmp = p.with_name(f".{p.name}.tmp-{os.getpid()}")
+    aside = None
+    try:
+        write(tmp)
+        if p.exists() and not is_ours(p):
+            if plan != "move_aside":
+                raise OutputRefused(f"{p}: a file probreg did not write appeared there during the run; nothing "
+                                    f"was replaced (the new one would have gone there; use --overwrite)")
+            aside = p.with_name(f"{p.name}.previous-{time.strftime('%Y%m%d-%H%M%S')}-{os.getpid()}")
+            os.replace(p, aside)
+        os.replace(tmp, p)
+    finally:
+        if tmp.exists():
+            tmp.unlink()
+    return aside

@@ -1,5 +1,7 @@
 """Pose-model heads on tiny ONNX graphs with known outputs: decoding, letterbox, back-mapping, tracking."""
 
+import json
+
 import cv2
 import numpy as np
 import pytest
@@ -141,7 +143,33 @@ def test_detect_command_writes_keypoints(tmp_path, small_clip):
     sx = np.zeros((1, 17, 384), np.float32)
     sy = np.zeros((1, 17, 512), np.float32)
     rtm = _constant_model(tmp_path / "r.onnx", (1, 3, 256, 192), {"simcc_x": sx, "simcc_y": sy})
-    assert main(["detect", str(clip), "--model", str(rtm)]) == 2  # top-down needs a box
+    assert main(["detect", str(clip), "--model", str(rtm), "--out", str(tmp_path / "r.json")]) == 2  # needs a box
+
+
+def test_detect_never_overwrites_keypoints_it_did_not_write(tmp_path, small_clip, capsys):
+    """The default output is the clip's own keypoints2d.json: one from another detector (or labelled
+    by hand) is refused before the model runs, moved aside with --overwrite, never lost; a file of
+    probreg detect's own is replaced."""
+    import shutil
+
+    clip = tmp_path / "clip"
+    shutil.copytree(small_clip, clip)
+    theirs = (clip / "keypoints2d.json").read_bytes()
+    kp = np.column_stack([np.full(17, 320.0), np.linspace(200, 400, 17), np.full(17, 0.9)])
+    path = _constant_model(tmp_path / "y.onnx", (1, 3, 640, 640),
+                           {"output0": _yolo_output([(320, 300, 60, 220, 0.9, kp)])})
+    assert main(["detect", str(clip), "--model", str(path)]) == 2
+    err = capsys.readouterr().err
+    assert "keypoints2d.json: exists and was not written by probreg" in err and "Traceback" not in err
+    assert (clip / "keypoints2d.json").read_bytes() == theirs
+    assert main(["detect", str(clip), "--model", str(path), "--overwrite"]) == 0
+    aside = sorted(clip.glob("keypoints2d.json.previous-*"))
+    assert len(aside) == 1 and aside[0].read_bytes() == theirs
+    ours = json.loads((clip / "keypoints2d.json").read_text())
+    assert ours["written_by"] == "probreg detect" and len(ours["frames"]) == 40
+    assert main(["detect", str(clip), "--model", str(path)]) == 0  # its own file: replaced
+    assert len(list(clip.glob("keypoints2d.json.previous-*"))) == 1
+    assert not list(clip.glob(".keypoints2d.json.tmp-*"))
 
 
 def test_real_model_finds_the_runner_in_paper_frames(shared_data):
