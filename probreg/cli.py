@@ -131,10 +131,12 @@ def _cmd_config(args):
     if args.out is None:
         sys.stdout.write(text)
         return 0
-    if args.out.exists() and not args.overwrite:
-        raise CliError(f"{args.out} exists: give another path, or --overwrite to replace it")
-    args.out.write_text(text, encoding="utf-8")
-    print(f"default configuration written to {args.out}")
+    from .io.output import check_file_output, write_file_output
+
+    same = lambda p: p.read_text(encoding="utf-8", errors="replace") == text  # noqa: E731 -- nothing to lose
+    aside = write_file_output(args.out, lambda tmp: tmp.write_text(text, encoding="utf-8"),
+                              check_file_output(args.out, same, overwrite=args.overwrite), same)
+    print(f"default configuration written to {args.out}" + (f" (the one before: {aside})" if aside else ""))
     return 0
 
 
@@ -496,7 +498,7 @@ def build_parser():
 
     cf = sub.add_parser("config", help="write the commented default configuration (TOML) for --config")
     cf.add_argument("--out", type=Path, default=None, help="file to write (default: standard output)")
-    cf.add_argument("--overwrite", action="store_true", help="replace an existing --out file")
+    cf.add_argument("--overwrite", action="store_true", help="move an existing --out file aside (never deleted)")
     cf.set_defaults(func=_cmd_config)
 
     sv = sub.add_parser("sensitivity", help="how much the results depend on the lens distortion assumed (k1 sweep)")

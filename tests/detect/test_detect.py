@@ -186,3 +186,14 @@ def test_real_model_finds_the_runner_in_paper_frames(shared_data):
         kp = detect_sequence([(0, cv2.imread(str(p)))], model)[0]
         found += int(np.isfinite(kp[:, 0]).sum() >= 10)
     assert found >= len(frames) - 2
+
+
+def test_export_yolo_refuses_a_file_it_did_not_write(tmp_path, capsys):
+    """Checked before anything else (the optional extra need not be installed): a model file of the
+    user's at --out is never replaced."""
+    mine = tmp_path / "my_model.onnx"
+    mine.write_bytes(b"the user's own model")
+    assert main(["models", "export-yolo", "--out", str(mine)]) == 2
+    err = capsys.readouterr().err
+    assert "exists; probreg does not replace a file it did not write" in err and "Traceback" not in err
+    assert mine.read_bytes() == b"the user's own model"

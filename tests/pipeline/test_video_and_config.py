@@ -91,6 +91,10 @@ def test_config_command_writes_the_default_and_never_overwrites(tmp_path, capsys
     out.write_text("mine")
     assert main(["config", "--out", str(out)]) == 2
     assert out.read_text() == "mine"
+    assert main(["config", "--out", str(out), "--overwrite"]) == 0  # the edited one is moved aside, not lost
+    assert out.read_text() == default_config_toml()
+    assert [p.read_text() for p in tmp_path.glob("probreg.toml.previous-*")] == ["mine"]
+    assert main(["config", "--out", str(out)]) == 0  # the default again: nothing to lose
     assert main(["config"]) == 0 and "[priors]" in capsys.readouterr().out
 
 
