@@ -15,7 +15,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..geometry import JOINT_NAMES, Camera, coco_to_h36m
+from ..geometry import COCO_NAMES, JOINT_NAMES, Camera, coco_to_h36m
 from .output import atomic_output_dir
 
 __all__ = [
@@ -219,6 +219,12 @@ def read_keypoints_json(path, n_frames=None):
     fmt = doc.get("format", "h36m17")
     if fmt not in ("h36m17", "coco17"):
         raise ClipFormatError(f"{path}: unknown keypoint format {fmt!r} (h36m17 or coco17)")
+    # optional 'joint_names' that are exactly the other format's order contradict 'format': every joint
+    # would be read as another one (names spelled otherwise are not checked)
+    other, other_names = ("coco17", COCO_NAMES) if fmt == "h36m17" else ("h36m17", JOINT_NAMES)
+    if isinstance(doc.get("joint_names"), list) and doc["joint_names"] == list(other_names):
+        raise ClipFormatError(f"{path}: 'format' says {fmt} but 'joint_names' are in {other}'s order; "
+                              f"set \"format\": \"{other}\" (or fix the names)")
     frames = doc["frames"]
     if not isinstance(frames, list):
         raise ClipFormatError(f"{path}: 'frames' must be a list")
@@ -285,7 +291,8 @@ def write_keypoints_json(path, keypoints_px, fmt="h36m17", written_by=None):
         else:
             frames.append({"frame": i, "keypoints": [[None if not np.isfinite(v) else round(float(v), 4)
                                                       for v in row] for row in k]})
-    write_json(path, {"format": fmt, "joint_names": list(JOINT_NAMES), "frames": frames,
+    names = list(JOINT_NAMES if fmt == "h36m17" else COCO_NAMES)
+    write_json(path, {"format": fmt, "joint_names": names, "frames": frames,
                       **({"written_by": written_by} if written_by else {})})
 
 

@@ -153,3 +153,22 @@ def test_import_names_a_bad_frame_rate_and_warns_of_keypoints_without_joints(tmp
     assert "no joint in any frame" in capsys.readouterr().out
     assert main([*args, "--fps", "50", "--out", str(tmp_path / "c3")]) == 0
     assert "no joint" not in capsys.readouterr().out
+
+
+def test_keypoints2d_json_round_trip_and_a_format_its_names_contradict(tmp_path, coco_kp):
+    """Both formats come back as written (COCO read into H36M order); a file whose 'joint_names' are
+    exactly the other format's order is an error naming the fix (read as declared, every joint would
+    be another one), while names spelled otherwise are left alone."""
+    from probreg.io.clip import read_keypoints_json, write_keypoints_json
+
+    for fmt, expect in (("h36m17", coco_kp), ("coco17", coco_to_h36m(coco_kp))):
+        write_keypoints_json(tmp_path / f"{fmt}.json", coco_kp, fmt=fmt)
+        assert np.allclose(read_keypoints_json(tmp_path / f"{fmt}.json"), expect, atol=1e-3, equal_nan=True)
+    doc = json.loads((tmp_path / "coco17.json").read_text())
+    doc["format"] = "h36m17"  # COCO data declared as H36M
+    (tmp_path / "bad.json").write_text(json.dumps(doc))
+    with pytest.raises(ClipFormatError, match="'joint_names' are in coco17's order; set \"format\": \"coco17\""):
+        read_keypoints_json(tmp_path / "bad.json")
+    doc["joint_names"] = [n.upper() for n in COCO_NAMES]
+    (tmp_path / "other.json").write_text(json.dumps(doc))
+    assert read_keypoints_json(tmp_path / "other.json").shape == (5, 17, 3)
