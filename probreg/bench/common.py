@@ -87,16 +87,29 @@ def find_shared_data(explicit=None):
     return None
 
 
+def is_bench_report(path):
+    """Whether ``path`` is a report a benchmark wrote (its third line names the ``probreg bench``
+    command), which a new run of it may replace."""
+    try:
+        lines = Path(path).read_text(encoding="utf-8", errors="replace").splitlines()[:3]
+    except OSError:
+        return False
+    return len(lines) == 3 and lines[0].startswith("# ") and lines[2].startswith("Command: `probreg bench")
+
+
 def run_benchmark(name, args, reports_dir="reports"):
-    """Run a registered benchmark and write ``reports/bench_<name>.md``; returns the path."""
+    """Run a registered benchmark and write ``reports/bench_<name>.md``; returns the path.  A file of
+    that name which no benchmark wrote is refused before the benchmark runs (never replaced)."""
+    from ..io.output import check_file_output, write_file_output
+
     if name not in BENCHMARKS:
         raise ValueError(f"unknown benchmark {name!r}; choose from {sorted(BENCHMARKS)}")
+    path = Path(reports_dir) / f"bench_{name}.md"
+    plan = check_file_output(path, is_bench_report)
     mod, fn = BENCHMARKS[name].split(":")
     report = getattr(importlib.import_module(mod), fn)(args)
-    out = Path(reports_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    path = out / f"bench_{name}.md"
-    path.write_text(report.to_markdown(typed_command(name)), encoding="utf-8")
+    text = report.to_markdown(typed_command(name))
+    write_file_output(path, lambda tmp: tmp.write_text(text, encoding="utf-8"), plan, is_bench_report)
     return path
 
 

@@ -517,3 +517,23 @@ def test_lift_with_no_frame_lifted_exits_3_with_its_files(clip, tmp_path, capsys
     assert "Traceback" not in err and "no frame was lifted" in err
     status = json.loads((tmp_path / "o" / "lift.json").read_text())["frame_status"]
     assert len(status) == 40 and "ok" not in status
+
+
+def test_a_report_file_no_benchmark_wrote_is_refused_before_the_benchmark(tmp_path, capsys, monkeypatch):
+    """``probreg bench NAME --reports DIR``: a ``bench_NAME.md`` there that no benchmark wrote is kept
+    and the benchmark does not run; a report of its own is replaced."""
+    import probreg.bench.validation as bv
+
+    calls = []
+    monkeypatch.setattr(bv, "run", lambda args: calls.append(1) or bv.BenchReport("validation", "T"))
+    reports = tmp_path / "reports"
+    reports.mkdir()
+    (reports / "bench_validation.md").write_text("# my own notes\n")
+    assert main(["bench", "validation", "--reports", str(reports)]) == 2
+    assert "was not written by probreg" in capsys.readouterr().err and not calls
+    assert (reports / "bench_validation.md").read_text() == "# my own notes\n"
+    (reports / "bench_validation.md").unlink()
+    for _ in range(2):  # written, then its own report replaced
+        assert main(["bench", "validation", "--reports", str(reports)]) == 0
+    assert calls == [1, 1] and (reports / "bench_validation.md").read_text().startswith("# T\n\nCommand: `probreg bench")
+    assert sorted(p.name for p in reports.iterdir()) == ["bench_validation.md"]
