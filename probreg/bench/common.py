@@ -105,7 +105,7 @@ def run_benchmark(name, args, reports_dir="reports"):
     if name not in BENCHMARKS:
         raise ValueError(f"unknown benchmark {name!r}; choose from {sorted(BENCHMARKS)}")
     path = Path(reports_dir) / f"bench_{name}.md"
-    plan = check_file_output(path, is_bench_report)
+    plan = check_file_output(path, is_bench_report, owner="a probreg benchmark")
     mod, fn = BENCHMARKS[name].split(":")
     report = getattr(importlib.import_module(mod), fn)(args)
     text = report.to_markdown(typed_command(name))

@@ -251,8 +251,9 @@ class atomic_output_dir:
         return False
 
 
-def check_file_output(path, is_ours, overwrite=False):
-    """Before any work: may the single output file ``path`` be written?
+def check_file_output(path, is_ours, overwrite=False, owner="probreg"):
+    """Before any work: may the single output file ``path`` be written?  (``owner``: who writes it,
+    for the message.)
 
     Returns ``"new"`` (nothing there), ``"replace"`` (a file ``is_ours(path)`` says probreg wrote)
     or ``"move_aside"`` (another file, and ``overwrite``).
@@ -271,7 +272,7 @@ def check_file_output(path, is_ours, overwrite=False):
         return "replace"
     if overwrite:
         return "move_aside"
-    raise OutputRefused(f"{p}: exists and was not written by probreg (use --overwrite to move it aside to "
+    raise OutputRefused(f"{p}: exists and was not written by {owner} (use --overwrite to move it aside to "
                         f"{p.name}.previous-<time>, or choose another --out)")
 
 

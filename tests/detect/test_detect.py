@@ -160,7 +160,7 @@ def test_detect_never_overwrites_keypoints_it_did_not_write(tmp_path, small_clip
                            {"output0": _yolo_output([(320, 300, 60, 220, 0.9, kp)])})
     assert main(["detect", str(clip), "--model", str(path)]) == 2
     err = capsys.readouterr().err
-    assert "keypoints2d.json: exists and was not written by probreg" in err and "Traceback" not in err
+    assert "keypoints2d.json: exists and was not written by probreg detect" in err and "Traceback" not in err
     assert (clip / "keypoints2d.json").read_bytes() == theirs
     assert main(["detect", str(clip), "--model", str(path), "--overwrite"]) == 0
     aside = sorted(clip.glob("keypoints2d.json.previous-*"))

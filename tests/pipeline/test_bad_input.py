@@ -530,7 +530,7 @@ def test_a_report_file_no_benchmark_wrote_is_refused_before_the_benchmark(tmp_pa
     reports.mkdir()
     (reports / "bench_validation.md").write_text("# my own notes\n")
     assert main(["bench", "validation", "--reports", str(reports)]) == 2
-    assert "was not written by probreg" in capsys.readouterr().err and not calls
+    assert "was not written by a probreg benchmark" in capsys.readouterr().err and not calls
     assert (reports / "bench_validation.md").read_text() == "# my own notes\n"
     (reports / "bench_validation.md").unlink()
     for _ in range(2):  # written, then its own report replaced
