@@ -287,6 +287,8 @@ def run_report(out_html, clip, result, joints_median, cameras, rendered=None):
                       f"between the main stand and across the infield).", cls="note")
     for note in (n for n in getattr(clip, "notes", ()) if str(n).startswith("camera cut")):
         rep.paragraph(f"Camera shots: {note} (grey in the per-frame status strip; probreg.lanes.shots).", cls="note")
+    for note in (n for n in getattr(clip, "notes", ()) if not str(n).startswith("camera cut")):
+        rep.paragraph(f"Input: {note} (run.json input_notes).", cls="note")  # missing or damaged images, ...
     if tb := getattr(result, "time_base", None):
         rep.paragraph(time_base_sentence(tb), cls="note")
     d = result.diagnostics
@@ -422,6 +424,8 @@ def uncalibrated_report(out_html, clip, registration, result):
                   + ". No frame gave a camera, so nothing was estimated: the angle and joint files hold NaN "
                   "(run.json lists every frame's lane status).", cls="banner")
     _explain_reasons(rep, result.verdict_reasons)
+    for note in getattr(clip, "notes", ()):
+        rep.paragraph(f"Input: {note} (run.json input_notes).", cls="note")
     rep.heading("Lane status of the frames")
     counts = registration.status_counts()
     rep.table(["status", "frames"], [[k, v] for k, v in sorted(counts.items(), key=lambda kv: -kv[1])],

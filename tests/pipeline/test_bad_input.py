@@ -218,6 +218,8 @@ def test_run_end_to_end_with_missing_image_stray_file_and_absurd_keypoint(clip, 
     assert run["frame_status"][33] in ("bad_image", "bridged_bad_image")
     assert any("1 frame image(s) could not be decoded (first: frame 33)" in n for n in run["input_notes"])
     assert "could not be decoded" in err.out
+    report = (out / "report.html").read_text()  # every input note in the report too, where users read
+    assert "1 frame image(s) could not be decoded (first: frame 33)" in report and "Thumbs.jpg" in report
     assert any("no detected joint in 6 of 40 frames (first: frame 26)" in n for n in run["input_notes"])
     assert (out / "report.html").exists() and (out / "angles.csv").exists()
     # why a frame has no angles: its keypoints' status, consistent with angles.csv
@@ -324,6 +326,20 @@ def test_run_with_no_frame_calibrated_writes_an_uncalibrated_result(clip, tmp_pa
     assert "Verdict: uncalibrated" in report
     # each reason with what it means and what to do
     assert "<th>what it means</th>" in report and "frames without the straight&#x27;s lines cannot calibrate" in report
+
+
+def test_an_uncalibrated_result_says_which_images_did_not_decode(clip, tmp_path, capsys):
+    blank = np.full((1080, 1920, 3), 90, np.uint8)
+    for p in (clip / "frames").glob("*.jpg"):
+        cv2.imwrite(str(p), blank)
+    (clip / "frames" / "000005.jpg").write_bytes(b"\xff\xd8 damaged")
+    out = tmp_path / "res"
+    assert main(["run", str(clip), "--out", str(out)]) == 3
+    run = json.loads((out / "run.json").read_text())
+    assert run["verdict"] == "uncalibrated" and run["frame_status"][5] == "bad_image"
+    assert run["frame_status"].count("no_lines") == 39
+    note = "1 frame image(s) could not be decoded (first: frame 5)"
+    assert any(note in n for n in run["input_notes"]) and note in (out / "report.html").read_text(encoding="utf-8")
 
 
 # ----------------------------------------------------------------------------- 6. late checks, leftovers, interrupts
