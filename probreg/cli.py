@@ -318,10 +318,10 @@ def _cmd_detect(args):
     if not has_frames(clip):
         raise CliError(f"{args.clip}: no frames/ folder or video.mp4 to run the pose model on")
     out = Path(args.out) if args.out else Path(args.clip) / "keypoints2d.json"
-    # before the model runs: keypoints probreg detect did not write (another detector's, hand-labelled) stay
-    plan = check_file_output(out, written_by_detect, overwrite=args.overwrite, owner="probreg detect")
+    plan = check_file_output(out, written_by_detect, overwrite=args.overwrite, owner="probreg detect")  # first
     box, point = _parse_floats(args.box, 4, "--box"), _parse_floats(args.point, 2, "--point")
-    kp = detect_athlete(clip, args.model, args.det_model, athlete=box or point, min_score=args.min_score)
+    kp = detect_athlete(clip, args.model, args.det_model, athlete=box or point, min_score=args.min_score,
+                        progress=_progress(args))  # a bar over the frames: a pose model takes its time
     aside = write_file_output(out, lambda tmp: write_keypoints_json(tmp, kp, written_by="probreg detect"), plan,
                               written_by_detect)
     found = int(np.sum(np.isfinite(kp[..., 0]).any(axis=1)))
