@@ -605,28 +605,16 @@ def build_parser():
     return p
 
 
-def _apply_config(parser, argv):
-    """Defaults from ``--config FILE`` for the commands that take it (flags still override)."""
-    pre = argparse.ArgumentParser(add_help=False)
-    pre.add_argument("--config", type=Path, default=None)
-    known, _ = pre.parse_known_args(argv)
-    if known.config is None:
-        return
-    from .config import read_config
-
-    values = read_config(known.config)
-    for action in parser._subparsers._group_actions:
-        for sp in action.choices.values():
-            dests = {a.dest for a in sp._actions}
-            if "config" in dests:
-                sp.set_defaults(**{k: v for k, v in values.items() if k in dests})
-
-
 def main(argv=None):
     parser = build_parser()
     argv = sys.argv[1:] if argv is None else list(argv)
+    pre = argparse.ArgumentParser(add_help=False)  # --config FILE: defaults for the commands that take it
+    pre.add_argument("--config", type=Path, default=None)
     try:
-        _apply_config(parser, argv)
+        if (config := pre.parse_known_args(argv)[0].config) is not None:
+            from .config import apply_config_defaults  # imports the pipeline's defaults: only when asked
+
+            apply_config_defaults(parser, config)
     except ValueError as exc:
         print(f"probreg: error: {exc}", file=sys.stderr)
         return 2

@@ -12,7 +12,7 @@ import tomllib
 from dataclasses import dataclass
 from pathlib import Path
 
-__all__ = ["CONFIG_KEYS", "ConfigError", "default_config_toml", "read_config"]
+__all__ = ["CONFIG_KEYS", "ConfigError", "default_config_toml", "read_config", "apply_config_defaults"]
 
 
 class ConfigError(ValueError):
@@ -178,3 +178,16 @@ def _convert(path, key, value):
             raise ConfigError(f"{where} must be [] or five numbers [k1, k2, p1, p2, k3], got {value!r}")
         return ",".join(repr(float(v)) for v in value) if value else None
     raise ConfigError(f"{where}: unsupported value {value!r}")  # pragma: no cover
+
+
+
+def apply_config_defaults(parser, path):
+    """Defaults from the configuration file ``path`` for the sub-commands of ``parser`` that take
+    ``--config`` (flags on the command line still override them).  Raises ``ValueError`` for a bad
+    file."""
+    values = read_config(path)
+    for action in parser._subparsers._group_actions:
+        for sp in action.choices.values():
+            dests = {a.dest for a in sp._actions}
+            if "config" in dests:
+                sp.set_defaults(**{k: v for k, v in values.items() if k in dests})
