@@ -23,7 +23,10 @@ ground truth:
 
 With ``--reseed N`` every clip runs a second time with ``--seed N``, and a table per set shows
 how far the results move with the seed alone (the sampler's and the bootstrap's random numbers):
-the knee error, its band's coverage, the camera height and the verdict.
+the knee error, its band's coverage, the camera height and the verdict.  With ``--jitter-px S``
+every clip runs once more, with seed 0, on a copy whose 2D keypoints are moved by normal noise of
+``S`` pixels (e.g. 0.05, far below a detector's noise): how far an imperceptible change of the
+input moves the same numbers.
 
 The same is done on the held-out set (:mod:`probreg.sim.heldout`: 40 randomised set-ups of
 probreg's own generator over the set-ups real broadcasts have, seeds fixed before any tuning;
@@ -314,15 +317,42 @@ def _score_set(clips, peer, tmp):
     return rows, scores
 
 
-def _reseed_scores(clips, where, seed):
-    """Every clip run again with ``--seed seed`` into ``where/<clip>`` and scored (no true-camera
-    lifting); a run without a result is ``{"failed": True}``, one that calibrated nothing
-    ``{"uncalibrated": True}``."""
+def jittered_clip(clip, where, sd_px):
+    """A copy of the clip folder ``clip`` as ``where/<clip name>`` whose 2D keypoints are moved by
+    normal noise of ``sd_px`` pixels (the same numbers for a clip every time: seeded by its name);
+    everything else is linked (copied where links cannot be made).  Returns the copy's path."""
+    import shutil
+    import zlib
+
+    dst = Path(where) / clip.name
+    dst.mkdir(parents=True)
+    for item in clip.iterdir():
+        if item.name != "keypoints2d.json":
+            try:
+                (dst / item.name).symlink_to(item.resolve())
+            except OSError:
+                (shutil.copytree if item.is_dir() else shutil.copyfile)(item, dst / item.name)
+    doc = json.loads((clip / "keypoints2d.json").read_text())
+    rng = np.random.default_rng(zlib.crc32(clip.name.encode()))
+    for f in doc["frames"]:
+        f["keypoints"] = f.get("keypoints") and [
+            [k[0] + float(rng.normal(0, sd_px)), k[1] + float(rng.normal(0, sd_px)), *k[2:]]
+            if k[0] is not None and k[1] is not None else k for k in f["keypoints"]]
+    (dst / "keypoints2d.json").write_text(json.dumps(doc))
+    return dst
+
+
+def _reseed_scores(clips, where, seed, jitter_px=0.0):
+    """Every clip run again with ``--seed seed`` (on a copy with keypoints jittered by ``jitter_px``
+    pixels when that is not 0, :func:`jittered_clip`) into ``where/<clip>`` and scored (no
+    true-camera lifting); a run without a result is ``{"failed": True}``, one that calibrated
+    nothing ``{"uncalibrated": True}``."""
     Path(where).mkdir(parents=True, exist_ok=True)
     out = {}
     for clip in clips:
         res = Path(where) / clip.name
-        code, dt, last = _run_cli(clip, res, seed=seed)
+        src = jittered_clip(clip, Path(where) / "inputs", jitter_px) if jitter_px else clip
+        code, dt, last = _run_cli(src, res, seed=seed)
         run = json.loads((res / "run.json").read_text()) if (res / "run.json").exists() else None
         if run is None or not (res / "angles.csv").exists():
             out[clip.name] = {"failed": True, "verdict": f"failed (exit {code}: {last})"}
@@ -510,15 +540,21 @@ def run(args=None):
             sets.append(("held-out set (probreg's generator, 40 randomised set-ups, seeds fixed before tuning; "
                          "100 frames each; no peer numbers)", {},
                          _heldout_clips(getattr(args, "heldout_dir", None) or scratch)))
-        _run_sets(rep, sets, only, getattr(args, "keep_outputs", None), getattr(args, "reseed", None))
+        _run_sets(rep, sets, only, getattr(args, "keep_outputs", None), getattr(args, "reseed", None),
+                  getattr(args, "jitter_px", None))
     return rep
 
 
-def _run_sets(rep, sets, only, keep=None, reseed=None):
+def _run_sets(rep, sets, only, keep=None, reseed=None, jitter_px=None):
     """Run and score every set; ``keep``: a folder that receives every run's result folder
     (``keep/<clip>``; none of them may exist yet: an old result would be scored as new), else
     they go to a temporary folder.  ``reseed``: a second seed every clip also runs with
-    (``keep/seed<N>/<clip>``), for the seed-stability table."""
+    (``keep/seed<N>/<clip>``), for the seed-stability table; ``jitter_px``: the sd (px) of the
+    noise on the keypoints of a copy every clip also runs on (``keep/jitter<S>/<clip>``)."""
+    # the further runs: (folder, seed, keypoint jitter px, label of the second run, section title)
+    variants = ([(f"seed{reseed}", reseed, 0.0, f"seed {reseed}", "Seed stability")] if reseed is not None else []) + (
+        [(f"jitter{jitter_px:g}", 0, float(jitter_px), f"jittered {jitter_px:g} px",
+          f"Stability under keypoint jitter ({jitter_px:g} px)")] if jitter_px else [])
     for title, peer, clips in sets:
         if only:
             clips = [c for c in clips if c.name in set(only.split(","))]
@@ -526,19 +562,18 @@ def _run_sets(rep, sets, only, keep=None, reseed=None):
             continue
         if keep is not None:
             # each clip's result folder and its true-camera lifting's work folder
-            names = (lambda c: (c.name, f"{c.name}.true_camera", f"seed{reseed}/{c.name}")) if reseed is not None \
-                else (lambda c: (c.name, f"{c.name}.true_camera"))
-            there = [c.name for c in clips if any((Path(keep) / n).exists() for n in names(c))]
+            there = [c.name for c in clips if any((Path(keep) / n).exists() for n in (
+                c.name, f"{c.name}.true_camera", *(f"{v[0]}/{c.name}" for v in variants)))]
             if there:
                 raise ValueError(f"{keep}: result folders already there ({', '.join(there[:3])}"
                                  f"{', ...' if len(there) > 3 else ''}); give an empty or new folder")
             Path(keep).mkdir(parents=True, exist_ok=True)
             rows, scores = _score_set(clips, peer, keep)
-            again = None if reseed is None else _reseed_scores(clips, Path(keep) / f"seed{reseed}", reseed)
+            again = [_reseed_scores(clips, Path(keep) / v[0], v[1], v[2]) for v in variants]
         else:
             with tempfile.TemporaryDirectory() as tmp:
                 rows, scores = _score_set(clips, peer, tmp)
-                again = None if reseed is None else _reseed_scores(clips, Path(tmp) / f"seed{reseed}", reseed)
+                again = [_reseed_scores(clips, Path(tmp) / v[0], v[1], v[2]) for v in variants]
         summary = _summary(scores, peer)
         rep.numbers[title] = summary
         rep.add(f"## {title[0].upper() + title[1:]}: per clip\n")
@@ -565,12 +600,13 @@ def _run_sets(rep, sets, only, keep=None, reseed=None):
                     "knee angles; `probreg.bench.posterior.true_gait`), by gait verdict; no target in the issues:\n")
             rep.add(md_table(["gait number", "holding the truth, gait verdict ok", "gait verdict unreliable", "all"],
                              gait_coverage_table(scores)))
-        if again is not None:
-            rows_s, changed = seed_rows(scores, again)
-            means = [_unflagged_knee(sc) for sc in (scores, again)]
-            rep.add(f"### Seed stability on the {title.split(' (')[0]}\n\nEvery clip run again with `--seed {reseed}` "
-                    f"(`--reseed {reseed}`; the first run's seed is 0): verdicts that changed: **{changed} of "
-                    f"{len(rows_s) - 1}**; unflagged clips' mean knee error {means[0][0]:.2f} deg over {means[0][1]} "
-                    f"clips (seed 0), {means[1][0]:.2f} deg over {means[1][1]} (seed {reseed}).\n")
-            rep.add(md_table(["clip", "knee err deg, seed 0", f"seed {reseed}", "knee in 90 % band %, seed 0",
-                              f"seed {reseed}", "camera height err %, seed 0", f"seed {reseed}", "verdict"], rows_s))
+        for (_, seed, jit, label, head), second in zip(variants, again):
+            rows_s, changed = seed_rows(scores, second)
+            means = [_unflagged_knee(sc) for sc in (scores, second)]
+            how = (f"with `--seed {seed}` (`--reseed {seed}`; the first run's seed is 0)" if not jit else
+                   f"on a copy whose keypoints are moved by normal noise of {jit:g} px (`--jitter-px {jit:g}`; seed 0)")
+            rep.add(f"### {head} on the {title.split(' (')[0]}\n\nEvery clip run again {how}: verdicts that changed: "
+                    f"**{changed} of {len(rows_s) - 1}**; unflagged clips' mean knee error {means[0][0]:.2f} deg over "
+                    f"{means[0][1]} clips (first run), {means[1][0]:.2f} deg over {means[1][1]} ({label}).\n")
+            rep.add(md_table(["clip", "knee err deg, first run", label, "knee in 90 % band %, first run", label,
+                              "camera height err %, first run", label, "verdict"], rows_s))

@@ -65,3 +65,20 @@ def test_reseed_with_the_same_seed_reproduces_every_number(small_clip, tmp_path)
     assert (keep / "seed0" / small_clip.name / "run.json").exists()
     with pytest.raises(ValueError, match="already there"):
         _run_sets(BenchReport("validation", "again"), [("test set", {}, [small_clip])], None, keep, reseed=0)
+
+
+def test_jittered_copy_moves_only_the_keypoints_and_the_same_way_each_time(small_clip, tmp_path):
+    """``--jitter-px``: the copy links everything but the keypoints, which move by noise of the given
+    size (the same noise for the clip every time); missing joints stay missing."""
+    from probreg.bench.validation import jittered_clip
+    from probreg.io.clip import read_keypoints_json
+
+    a = jittered_clip(small_clip, tmp_path / "a", 0.05)
+    b = jittered_clip(small_clip, tmp_path / "b", 0.05)
+    k0, ka, kb = (read_keypoints_json(p / "keypoints2d.json") for p in (small_clip, a, b))
+    d = (ka - k0)[..., :2]
+    ok = np.isfinite(d)
+    assert np.array_equal(np.isnan(ka), np.isnan(k0)) and np.array_equal(ka, kb, equal_nan=True)
+    assert 0.04 < float(np.std(d[ok])) < 0.06 and np.array_equal(ka[..., 2], k0[..., 2], equal_nan=True)
+    assert (a / "frames").resolve() == (small_clip / "frames").resolve()
+    assert (a / "clip.json").read_text() == (small_clip / "clip.json").read_text()
