@@ -180,7 +180,6 @@ def _convert(path, key, value):
     raise ConfigError(f"{where}: unsupported value {value!r}")  # pragma: no cover
 
 
-
 def apply_config_defaults(parser, path):
     """Defaults from the configuration file ``path`` for the sub-commands of ``parser`` that take
     ``--config`` (flags on the command line still override them).  Raises ``ValueError`` for a bad
