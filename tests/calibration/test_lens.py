@@ -273,3 +273,47 @@ def test_a_wide_view_whose_family_folds_at_the_prior_centre_gives_back_its_lens(
     lens, _ = L.lens_registration(reg, height_m=9.0)
     assert lens.kappa_star == pytest.approx(truth, rel=0.05)
     assert np.allclose(lens.evidence.zoom, f_true / np.median(f_true), atol=0.03)
+
+
+def test_zoom_ratios_are_read_where_one_lens_straightens_every_frame(distorted_lanes):
+    # a camera 6.33 m high panning with the athlete while zooming in by 15 %: its families give
+    # the true zoom ratios at its height, elsewhere ratios that change with the pan too (up to
+    # +-20 % at the prior's 9 m, as measured on wide near views)
+    from types import SimpleNamespace
+
+    from probreg.calibration import lens as L
+
+    h_true = float(L.ZOOM_SCAN_HEIGHTS_M[5])
+    k1, n = -0.2, 12
+    zoom = np.linspace(1.0, 1.15, n)
+    pan = np.linspace(-1.0, 1.0, n)
+    rng = np.random.default_rng(11)
+    cams = [Camera.look_at([30.0, -25.0, h_true], [38.0 + 2.0 * i, -5.0, 0.5], fov_deg=30.0, dist=[k1, 0, 0, 0, 0])
+            for i in range(n)]
+    cams = [c.with_(K=np.diag([c.focal_px * z, c.focal_px * z, 1.0]) + np.pad(c.K[:2, 2:], ((0, 1), (2, 0))))
+            for c, z in zip(cams, zoom)]
+    frames = [_noisy(distorted_lanes(c), rng, 0.05) for c in cams]
+    f_true = np.array([c.focal_px for c in cams])
+
+    def focal_at_height(h):  # the pan's share grows with the distance from the true height (in log)
+        return f_true * np.exp(0.6 * pan * np.log(h / h_true))
+
+    reg = SimpleNamespace(frame_lanes=frames, sequence=SimpleNamespace(focal_at_height=focal_at_height))
+    r_ref = L.reference_radius(frames[0].image_size)
+    truth = k1 * (r_ref / np.median(f_true)) ** 2  # kappa of the reference (median) zoom
+    curvatures = L._frame_curvatures(frames, 0.8 * truth)
+    assert curvatures is not None and len(curvatures[0]) == n
+    ratios, ref, h = L._zoom_by_lines(reg, curvatures, 9.0)
+    assert h == pytest.approx(h_true)
+    assert np.allclose(ratios, zoom / np.median(zoom), rtol=1e-3) and ref == pytest.approx(np.median(f_true), rel=1e-3)
+    best = plumb_line_evidence(frames, zoom=ratios).best_kappa()
+    assert best == pytest.approx(truth, rel=0.02)
+    # the ratios at the prior's centre would have compromised the lens
+    at_centre = L._ratios_of(focal_at_height(9.0))[0]
+    assert abs(plumb_line_evidence(frames, zoom=at_centre).best_kappa() / truth - 1) > 0.04
+    # each frame's own quadratic has its minimum at that frame's image-space lens, k1 (r_ref / f_i)**2,
+    # and at 0 for straight lines
+    ii, a, b = curvatures
+    assert np.allclose(-b / (2 * a), k1 * (r_ref / f_true[ii]) ** 2, rtol=0.03)
+    ii, a, b = L._frame_curvatures([distorted_lanes(c.with_(dist=np.zeros(5))) for c in cams[:3]], 0.0)
+    assert np.all(np.abs(b / (2 * a)) < 1e-5)
