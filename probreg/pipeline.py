@@ -259,14 +259,14 @@ def _write_uncalibrated(clip, reg, side, out_dir, options, error, t0, log, input
 
 def _branch_candidate(clip, reg, options, given, branch):
     """One branch's ``(registration, side, lens, model)`` (raises :class:`NoCalibrationError`)."""
-    side = reg.orient(options.priors.camera_height.centre(), clip.keypoints_px, branch, fps=clip.fps, given=given)
+    h0 = options.priors.camera_height.centre()
+    side = reg.orient(h0, clip.keypoints_px, branch, fps=clip.fps, given=given)
     lens, model_reg, dist = None, reg, options.dist
     k1_only = dist is not None and dist[0] != 0 and not np.any(np.asarray(dist, float)[1:])
     if (dist is None and options.lens == "infer") or k1_only:
-        # the lines are undistorted at their own best fit (the default prior); a given k1 then
-        # enters the posterior as a sharp prior, and the plumb-line evidence ties it to the
-        # focal length, i.e. to the camera height (the same path as an inferred lens)
-        lens, model_reg = lens_registration(reg, options.lens_prior, height_m=options.priors.camera_height.centre())
+        # lines undistorted at their own best fit (default prior); a given k1 is then a sharp prior, and the
+        # plumb line ties it to the focal length, i.e. the height (zoom ratios then chosen by the lines)
+        lens, model_reg = lens_registration(reg, options.lens_prior, height_m=h0, zoom_from_lines=k1_only)
         if k1_only and lens is not None:
             lens, dist = replace(lens, prior=LensPrior.given(dist[0]), given_k1=float(dist[0])), None
     model = ClipModel(model_reg, clip.keypoints_px, clip.fps, clip.athlete_lane, priors=options.priors,

@@ -32,9 +32,9 @@ from __future__ import annotations
 from dataclasses import dataclass
 
 import numpy as np
-from scipy.ndimage import median_filter
 
 from ..lanes.types import FrameLanes, _scale_frame
+from .zoom import ZOOM_SCAN_MIN_SHIFT_PX, _zoom_by_lines, _zoom_ratios
 
 __all__ = ["LensPrior", "LensEvidence", "LensModel", "plumb_line_evidence", "infer_lens", "undistort_registration",
            "lens_registration", "kappa_grid", "undistort_px", "distort_px",
@@ -417,97 +417,6 @@ class LensModel:
                 **self.evidence.to_dict()}
 
 
-#: camera heights (m) scanned for the frames' zoom ratios when the families at the prior's centre
-#: height do not give a regular focal-length series (:func:`_zoom_ratios`): every broadcast position
-ZOOM_SCAN_HEIGHTS_M = tuple(np.geomspace(2.0, 40.0, 14))
-#: a frame-to-frame change of the focal length above this (log) is no zoom but a family that
-#: folds over at that height (two members of very different focal length either side of it)
-ZOOM_JUMP_LOG = 0.05
-#: a series with at most this share of such jumps is regular (an odd misread frame, which the
-#: running median of :func:`_zoom_ratios` drops)
-ZOOM_JUMP_SHARE = 0.02
-
-
-def _series_quality(f):
-    """``(coverage, jumps, roughness)`` of a focal-length series: the share of frames with a
-    member, the share of consecutive frame pairs whose focal length jumps by more than
-    :data:`ZOOM_JUMP_LOG` (log), and the median absolute second difference of ``log f``.
-
-    >>> f = np.r_[np.full(10, 1000.0), np.full(10, 60.0)]
-    >>> cover, jumps, rough = _series_quality(f)
-    >>> float(cover), round(float(jumps), 3), float(rough)
-    (1.0, 0.053, 0.0)
-    """
-    ok = np.isfinite(f)
-    g = np.log(np.where(ok, f, 1.0))
-    d1 = np.abs(np.diff(g))[ok[1:] & ok[:-1]]
-    d2 = np.abs(np.diff(g, 2))[ok[2:] & ok[1:-1] & ok[:-2]]
-    return (float(ok.mean()) if len(f) else 0.0, float(np.mean(d1 > ZOOM_JUMP_LOG)) if len(d1) else 0.0,
-            float(np.median(d2)) if len(d2) else np.inf)
-
-
-def _zoom_height(reg, height_m):
-    """The height at which the frames' zoom ratios are read, and its focal-length series:
-    ``height_m`` when the series there is regular (members in 95 % of the frames with lanes or
-    more, frame-to-frame jumps in at most :data:`ZOOM_JUMP_SHARE` of the pairs), else the
-    regular height of :data:`ZOOM_SCAN_HEIGHTS_M` nearest to it (in log), else the height with
-    the most members, then the fewest jumps, then the smoothest series.
-
-    The family of a wide view's bent (still distorted) lines can end below a plausible height
-    (no member there) or fold over near it (members of 600 and 6000 px in neighbouring frames,
-    measured on a 29 deg view with ``k1 = 0.24``); ratios read there are noise, and a frame given
-    a ratio of 0.1 is undistorted by a hundred times the clip's lens, which ruins the evidence.
-    The ratios between frames hardly depend on the height wherever the series is regular and
-    the height plausible (far below it a family's members have fields of view of 100 deg and
-    more, and other ratios)."""
-    n_ok = max(sum(fl.ok for fl in reg.frame_lanes), 1) / max(len(reg.frame_lanes), 1)
-
-    def regular(q):
-        return q[0] >= 0.95 * n_ok and q[1] <= ZOOM_JUMP_SHARE
-
-    f = reg.sequence.focal_at_height(height_m)
-    if regular(_series_quality(f)):
-        return float(height_m), f
-    scan = [(h, reg.sequence.focal_at_height(h)) for h in ZOOM_SCAN_HEIGHTS_M]
-    quality = [_series_quality(g) for _, g in scan]
-    good = [k for k, q in enumerate(quality) if regular(q)]
-    if good:
-        k = min(good, key=lambda k: abs(np.log(scan[k][0] / height_m)))
-        return float(scan[k][0]), scan[k][1]
-    # nothing regular: the most members (to the hundredth), then the fewest jumps, then the
-    # smoothest series, the given height first among equals
-    scan.insert(0, (float(height_m), f))
-    quality.insert(0, _series_quality(f))
-    k = max(range(len(scan)), key=lambda k: (round(quality[k][0], 2), -quality[k][1], -quality[k][2], k == 0))
-    return float(scan[k][0]), scan[k][1]
-
-
-def _zoom_ratios(reg, height_m):
-    """Each frame's focal length relative to the clip's median, from the families of the lines
-    at ``height_m`` or, where those are not regular there, at another height
-    (:func:`_zoom_height`; ratios between frames hardly depend on the height), smoothed over
-    time with a 25-frame running median; frames without a member get their neighbours' ratio.
-    Also returns the reference (median) focal length (of the height used)."""
-    return _ratios_of(_zoom_height(reg, height_m)[1])
-
-
-def _ratios_of(f):
-    """A focal-length series (F,) as zoom ratios to its median, smoothed over time, and that
-    median (ones and NaN without any focal length)."""
-    F = len(f)
-    if not np.isfinite(f).any():
-        return np.ones(F), float("nan")
-    # a broadcast zoom changes smoothly; single frames' families scatter by several per cent
-    # (near the family's highest member the focal length at a given height is ill-conditioned):
-    # a running median over half a second of frames keeps the zoom and drops that scatter
-    ok = np.isfinite(f)
-    t = np.arange(F)
-    g = np.interp(t, t[ok], np.log(f[ok]))
-    g = median_filter(g, size=min(25, 2 * (F // 2) - 1) if F > 2 else 1, mode="nearest")
-    ref = float(np.exp(np.median(g[ok])))
-    return np.exp(g) / ref, ref
-
-
 def _frame_curvatures(frame_lanes, kappa_centre, max_frames=40, max_points=40):
     """Each evidence frame's plumb-line RSS as a quadratic in the frame's own image-space
     coefficient ``kappa_i = kappa / zoom_i**2`` (fitted on five values around
@@ -529,54 +438,6 @@ def _frame_curvatures(frame_lanes, kappa_centre, max_frames=40, max_points=40):
     ii = np.array([f[0] for f in frames])[ok]
     up = a > 0
     return (ii[up], a[up], b[up]) if up.any() else None
-
-
-def _zoom_by_lines(reg, curvatures, height_m):
-    """The frames' zoom ratios read at the height whose ratios let one lens straighten the lines
-    best: ``(ratios, reference focal length, height)``, or None when no height has a regular
-    focal-length series.
-
-    Away from the camera's true height, a family's focal lengths change from frame to frame
-    with the pan (a camera following the athlete), not only with the zoom: on wide near
-    views read at 9 m, ratios off by up to 20 % where the camera did not zoom at all.  A
-    frame undistorted with a zoom ratio off by ``e`` is undistorted by ``(1 + e)**-2`` times the
-    lens, and the clip's ``kappa`` became a compromise of those (5-12 % low on several wide
-    views).  The lines themselves say which ratios are right: with the true ones a single
-    ``kappa`` straightens every frame.  So each candidate height (``height_m`` and
-    :data:`ZOOM_SCAN_HEIGHTS_M`, those with a regular series as in :func:`_zoom_height`) is
-    scored by the summed plumb-line RSS at its best ``kappa`` (``curvatures`` from
-    :func:`_frame_curvatures`: a closed form per height), and the lowest wins (the
-    profile likelihood of the height the ratios are read at; the camera height itself is
-    left to the clip model).  Around the best, :data:`ZOOM_REFINE` more heights towards each
-    neighbour are scored (the scanned heights are 26 % apart).""" 
-    ii, a, b = curvatures
-    n_ok = max(sum(fl.ok for fl in reg.frame_lanes), 1) / max(len(reg.frame_lanes), 1)
-
-    def score(h):
-        f = reg.sequence.focal_at_height(h)
-        cover, jumps, _ = _series_quality(f)
-        if cover < 0.95 * n_ok or jumps > ZOOM_JUMP_SHARE:
-            return None
-        ratios, ref = _ratios_of(f)
-        w = 1.0 / ratios[ii] ** 2
-        rss_drop = np.sum(b * w) ** 2 / (4.0 * np.sum(a * w * w))  # sum c - min RSS
-        return (rss_drop, ratios, ref, float(h))
-
-    scan = sorted(set((float(height_m),) + tuple(float(h) for h in ZOOM_SCAN_HEIGHTS_M)))
-    scored = [s for s in map(score, scan) if s is not None]
-    if not scored:
-        return None
-    best = max(scored, key=lambda s: s[0])
-    if ZOOM_REFINE:
-        j = scan.index(best[3])
-        lo, hi = scan[max(j - 1, 0)], scan[min(j + 1, len(scan) - 1)]
-        extra = [s for s in map(score, np.geomspace(lo, hi, 2 * ZOOM_REFINE + 1)[1:-1]) if s is not None]
-        best = max([best] + extra, key=lambda s: s[0])
-    return best[1:]
-
-
-#: heights scored between the best scanned height and each neighbour (:func:`_zoom_by_lines`)
-ZOOM_REFINE = 2
 
 
 def infer_lens(reg, prior: LensPrior = LensPrior(), height_m=10.0):
@@ -611,7 +472,7 @@ def undistort_registration(reg, lens: LensModel, min_shift_px=0.02):
     return out
 
 
-def lens_registration(reg, prior: LensPrior = LensPrior(), height_m=10.0, iterations=2):
+def lens_registration(reg, prior: LensPrior = LensPrior(), height_m=10.0, iterations=2, zoom_from_lines=True):
     """The lens of a clip and its registration with undistorted lines: ``(lens, registration)``
     (``(None, reg)`` when no frame has lines to measure).
 
@@ -622,10 +483,15 @@ def lens_registration(reg, prior: LensPrior = LensPrior(), height_m=10.0, iterat
     recomputed and the lines undistorted anew, ``iterations`` times (on a 35 deg, k1 = -0.17
     view, with the running median of :func:`_zoom_ratios`: zoom-ratio error 5.7 % -> 0.5 %, the
     family's focal length at the true height within 0.3 % on 95 % of the frames instead of 2.5 %).
-    From the undistorted lines on, the height the ratios are read at is the one whose ratios
-    let one lens straighten every frame's lines best (:func:`_zoom_by_lines`), not the prior's
-    centre: on wide near views of cameras 4-10 m high, read at 9 m, the ratios had pan-made
-    errors of up to 20 % and ``kappa`` came out up to 12 % off."""
+    With ``zoom_from_lines`` (and a lens that moves the image corner by
+    :data:`ZOOM_SCAN_MIN_SHIFT_PX` or more), from the undistorted lines on the height the ratios
+    are read at is the one whose ratios let one lens straighten every frame's lines best
+    (:func:`_zoom_by_lines`), not the prior's centre: on wide near views of cameras 4-10 m high,
+    read at 9 m, the ratios had pan-made errors of up to 20 % and ``kappa`` came out up to 12 %
+    off (2 % with the lines' choice).  The pipeline asks for it when the lens is given
+    (``probreg run --dist``), where the ratios carry the plumb line's hold on the height; with the
+    lens inferred it keeps the prior centre's ratios (docs/method.md, "Zoom ratios chosen by the
+    lines")."""
     lens = infer_lens(reg, prior, height_m)
     if lens is None:
         return None, reg
@@ -634,9 +500,13 @@ def lens_registration(reg, prior: LensPrior = LensPrior(), height_m=10.0, iterat
     for _ in range(int(iterations)):
         if out is reg:
             break  # a lens that moves nothing: the distorted families are the families
-        if curvatures is None:
+        strong = abs(lens.kappa_star) * lens.evidence.r_ref >= ZOOM_SCAN_MIN_SHIFT_PX
+        if zoom_from_lines and strong and curvatures is None:
             curvatures = _frame_curvatures(reg.frame_lanes, lens.kappa_star)
-        picked = _zoom_by_lines(out, curvatures, height_m) if curvatures is not None else None
+        # an RSS difference in the evidence's nats (frames tempered; not by the Birge ratio, which
+        # the ratios being chosen inflate)
+        nats = lens.evidence.weight * lens.evidence.birge / (2.0 * max(lens.evidence.noise_px, 0.05) ** 2)
+        picked = _zoom_by_lines(out, curvatures, height_m, nats) if curvatures is not None else None
         zoom, f_ref, zoom_h = picked if picked is not None else (*_zoom_ratios(out, height_m), None)
         if not np.isfinite(f_ref):
             break

@@ -232,7 +232,7 @@ class _FakeFamilies:
 
 
 def test_zoom_ratios_are_read_at_a_regular_height():
-    from probreg.calibration.lens import _zoom_height, _zoom_ratios
+    from probreg.calibration.zoom import _zoom_height, _zoom_ratios
 
     zoom = 1 + 0.03 * np.linspace(-1, 1, 30)  # the true zoom: a steady 6 % zoom-in (the running median keeps it)
 
@@ -258,6 +258,7 @@ def test_a_wide_view_whose_family_folds_at_the_prior_centre_gives_back_its_lens(
     # ratios read there undistorted some frames by ~100x the lens and the lines' best kappa came
     # out at a quarter of the truth (0.0056 for 0.0192)
     from probreg.calibration import lens as L
+    from probreg.calibration import zoom as Z
     from probreg.calibration.registration import register_clip
     from probreg.io.clip import load_clip
     from probreg.sim import config_from_preset, synthesize, write_clip
@@ -267,7 +268,7 @@ def test_a_wide_view_whose_family_folds_at_the_prior_centre_gives_back_its_lens(
     clip = load_clip(tmp_path / "c", min_score=0.3)
     reg = register_clip(clip)
     reg.orient(9.0, clip.keypoints_px, "narrow", fps=clip.fps)
-    assert L._series_quality(reg.sequence.focal_at_height(9.0))[1] > 0.05  # the fold is there
+    assert Z._series_quality(reg.sequence.focal_at_height(9.0))[1] > 0.05  # the fold is there
     f_true = np.array([c.focal_px for c in synth.cameras])
     truth = synth.cameras[0].dist[0] * (L.reference_radius(clip.image_size) / np.median(f_true)) ** 2
     lens, _ = L.lens_registration(reg, height_m=9.0)
@@ -282,8 +283,9 @@ def test_zoom_ratios_are_read_where_one_lens_straightens_every_frame(distorted_l
     from types import SimpleNamespace
 
     from probreg.calibration import lens as L
+    from probreg.calibration import zoom as Z
 
-    h_true = float(L.ZOOM_SCAN_HEIGHTS_M[5])
+    h_true = float(Z.ZOOM_SCAN_HEIGHTS_M[5])
     k1, n = -0.2, 12
     zoom = np.linspace(1.0, 1.15, n)
     pan = np.linspace(-1.0, 1.0, n)
@@ -303,13 +305,13 @@ def test_zoom_ratios_are_read_where_one_lens_straightens_every_frame(distorted_l
     truth = k1 * (r_ref / np.median(f_true)) ** 2  # kappa of the reference (median) zoom
     curvatures = L._frame_curvatures(frames, 0.8 * truth)
     assert curvatures is not None and len(curvatures[0]) == n
-    ratios, ref, h = L._zoom_by_lines(reg, curvatures, 9.0)
+    ratios, ref, h = Z._zoom_by_lines(reg, curvatures, 9.0)
     assert h == pytest.approx(h_true)
     assert np.allclose(ratios, zoom / np.median(zoom), rtol=1e-3) and ref == pytest.approx(np.median(f_true), rel=1e-3)
     best = plumb_line_evidence(frames, zoom=ratios).best_kappa()
     assert best == pytest.approx(truth, rel=0.02)
     # the ratios at the prior's centre would have compromised the lens
-    at_centre = L._ratios_of(focal_at_height(9.0))[0]
+    at_centre = Z._ratios_of(focal_at_height(9.0))[0]
     assert abs(plumb_line_evidence(frames, zoom=at_centre).best_kappa() / truth - 1) > 0.04
     # each frame's own quadratic has its minimum at that frame's image-space lens, k1 (r_ref / f_i)**2,
     # and at 0 for straight lines
