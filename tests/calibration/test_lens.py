@@ -144,6 +144,7 @@ def test_run_infers_the_lens_and_decomposes_the_bands(wide_lens_clip, tmp_path):
         shares = [dec[name][g] for g in ("lens", "camera", "limbs", "keypoints")]
         assert sum(shares) == pytest.approx(1.0, abs=1e-9) and min(shares) >= 0
     assert run["lens"]["informative"] and "band_decomposition_method" in run
+    assert run["lens"]["zoom_height_m"] is None  # an inferred lens keeps the prior centre's zoom ratios
 
 
 def test_a_given_k1_is_a_sharp_prior_on_the_inferred_lens_path(wide_lens_clip, tmp_path):
@@ -166,6 +167,8 @@ def test_a_given_k1_is_a_sharp_prior_on_the_inferred_lens_path(wide_lens_clip, t
     assert cam["frames"][0]["dist"][0] == pytest.approx(k_true)
     run = json.loads((tmp_path / "given" / "run.json").read_text())
     assert run["lens"]["given_k1"] == pytest.approx(k_true) and run["lens"]["informative"]  # a 30 deg barrel lens
+    # a given lens: the zoom ratios are read at the height the lines choose, near the camera's own
+    assert abs(np.log(run["lens"]["zoom_height_m"] / float(gt.cameras[0].C[2]))) < np.log(1.3)
     k1_draws = np.asarray(res.posterior.posterior["k1"]).ravel()
     assert abs(np.median(k1_draws) - k_true) < 0.002 and np.std(k1_draws) < 0.004
     h = np.exp(np.asarray(res.posterior.posterior["log_height"]).ravel())
