@@ -414,7 +414,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
 
         early = fork_call(lambda: posterior_figures(model.priors, idata))
     diag = _diagnostics(sampler, tau, idata, names=model.param_names)
-    diag["height_terms"] = model.height_conflict  # do the camera height's terms agree? (tempered if not)
+    diag["height_terms"], diag["given_lens"] = model.height_conflict, model.given_lens_conflict()  # do they agree?
     height = static_interval(np.exp(flat[:, 0]))  # calibrated 90 % interval (and the model's own)
     athlete = {f"{k}_m": static_interval(v) for k, v in {"stature": flat[:, 1], **model.lengths(flat)}.items()}
     lens_doc = _lens_summary(options, lens, flat)
@@ -461,7 +461,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         stature_draws=flat[:, 1], stature_prior=options.priors.stature, branch=branch,
         member_sensitivity=sensitivity, lanes_agree=agree, noise_rho=model.noise_rho,
         knee_band_deg=knee_band_width(summ), obliquity_deg=obliquity, knee_peak_deg=knee_peak,
-        left_right_exchanged=exchanged, time_base=time_base)
+        left_right_exchanged=exchanged, time_base=time_base, lens_conflict=diag.get("given_lens"))
     result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
                        gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
                        verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,

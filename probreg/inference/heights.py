@@ -289,3 +289,42 @@ def height_terms_note(conflict):
     peaks = sorted(conflict["peaks_m"].items(), key=lambda kv: kv[1])
     return ("camera height terms disagree (" + ", ".join(f"{k.replace('_', ' ')} {v:.2f} m" for k, v in peaks)
             + f"; {conflict['conflict_nats']:.1f} nats, limit {conflict['threshold_nats']:.1f})")
+
+
+#: tail probability below which a given lens counts as contradicting the clip's own height terms
+#: (:func:`lens_conflict`); stricter than :data:`CONFLICT_P` because those terms are not
+#: calibrated likelihoods and are biased on some close views (docs/method.md)
+LENS_CONFLICT_P = 1e-4
+
+
+def lens_conflict(log_grid, height_ll, lens_ll, p=LENS_CONFLICT_P):
+    """Does a given lens agree with the clip's other evidence of the camera height?
+
+    With ``k1`` known, the lane lines' curvature fixes the focal length and so the height
+    (``lens_ll``: the plumb-line log-likelihood at each height); the height-only terms measure
+    it on their own (``height_ll``, as the model sums them).  Where their sum peaks, each falls
+    short of its own maximum; the deficits' sum, were both measurements of one height, would be
+    half a chi-square with one degree of freedom.  Beyond its ``1 - p`` quantile the given lens
+    and the clip tell different heights: a lens calibrated at another zoom, or another lens.
+    None when either curve has no values.  Returns ``deficit_nats``, ``threshold_nats``,
+    ``height_lens_m`` and ``height_other_m`` (where each peaks).
+
+    >>> x = np.log(np.geomspace(3.0, 12.0, 300))
+    >>> q = lambda h0, s: -0.5 * ((x - np.log(h0)) / s) ** 2
+    >>> round(lens_conflict(x, q(6.0, 0.1), q(6.1, 0.01))["deficit_nats"], 2)
+    0.01
+    >>> c = lens_conflict(x, q(6.0, 0.1), q(9.0, 0.01))  # 4 sd of the other terms apart
+    >>> [round(c[k], 2) for k in ("height_lens_m", "height_other_m", "deficit_nats", "threshold_nats")]
+    [9.0, 5.99, 8.14, 7.57]
+    """
+    from scipy.stats import chi2
+
+    h, z = np.asarray(height_ll, float), np.asarray(lens_ll, float)
+    ok = np.isfinite(h) & np.isfinite(z)
+    if ok.sum() < 3 or np.ptp(z[ok]) < 1e-9:
+        return None
+    x = np.asarray(log_grid, float)[ok]
+    h, z = h[ok], z[ok]
+    j = int(np.argmax(h + z))
+    return {"deficit_nats": float(h.max() + z.max() - h[j] - z[j]), "threshold_nats": 0.5 * float(chi2.ppf(1 - p, 1)),
+            "height_lens_m": float(np.exp(x[int(np.argmax(z))])), "height_other_m": float(np.exp(x[int(np.argmax(h))]))}

@@ -67,8 +67,8 @@ from ..lifting import LiftConfig
 from ..lifting.trajectory import _runs, camera_track_config, fit_ground_track
 from .bands import stance_window
 from .camera_path import CameraPath, along_path
-from .heights import (HEIGHT_SYSTEMATIC_SD, height_grid, identity_height, limb_consistency, smear_log_likelihood,
-                      term_conflict)
+from .heights import (HEIGHT_SYSTEMATIC_SD, height_grid, identity_height, lens_conflict, limb_consistency,
+                      smear_log_likelihood, term_conflict)
 from .priors import SEGMENT_PROPORTIONS, ModelPriors
 from .parallel import default_workers, fork_map
 from .propagation import DrawPropagation
@@ -209,6 +209,15 @@ class ClipModel(DrawPropagation, EmceeSampling):
     def param_names(self):
         """Names of the posterior's parameters (``k1`` last when the lens is inferred)."""
         return PARAM_NAMES + (["k1"] if self.lens is not None else [])
+
+    def given_lens_conflict(self):
+        """A given lens's plumb-line term against the height terms (:func:`.heights.lens_conflict`), or None."""
+        if self.lens is None or self.lens.given_k1 is None:
+            return None
+        x, ll = self._height_terms()
+        with np.errstate(invalid="ignore", divide="ignore"):
+            z = self.lens.evidence.log_likelihood(self.lens.evidence.kappa_of(self.lens.given_k1, self.f_ref_grid))
+        return lens_conflict(x, ll, np.interp(x, np.log(self.grid), z, left=np.nan, right=np.nan))
 
     def k1_at(self, height_m):
         """``k1`` the lines' undistortion implies at ``height_m`` (the family's reference focal

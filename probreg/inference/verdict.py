@@ -273,6 +273,12 @@ REASON_HELP = {
          "other frame, which the noise model and the smoothing read as motion, and the bands are far too narrow"),
         "give the frames once each: extract the clip at its content's frame rate",
     ),
+    "given lens contradicts": (
+        ("the lane lines' curvature under the given k1 puts the camera at another height than the clip's own "
+         "evidence (ground track, planted feet, limbs): a lens calibrated at another zoom, another lens, or "
+         "(on close, low views) height terms that are off themselves"),
+        "check the lens calibration (its zoom setting), or run without --dist to infer the lens",
+    ),
     **dict.fromkeys(("slow motion", "fast motion", "time base unclear"), (
         ("the clip's time does not run at its frame rate (a slow-motion replay, or a wrong fps): every "
          "time-based number (cadence, speed, contact times) is off by that factor, and the smoothing's "
@@ -472,7 +478,7 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
                  log_height_prior_sd=None, side=None, bone_cv_pct=None, speed_mps=None,
                  stature_draws=None, stature_prior=None, branch=None, member_sensitivity=None,
                  lanes_agree=None, noise_rho=None, knee_band_deg=None, obliquity_deg=None, knee_peak_deg=None,
-                 left_right_exchanged=None, cuts=None, time_base=None,
+                 left_right_exchanged=None, cuts=None, time_base=None, lens_conflict=None,
                  thresholds: VerdictThresholds = VerdictThresholds()):
     """The clip verdict and its reasons.
 
@@ -524,6 +530,8 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
         (``--shot all``; :mod:`probreg.lanes.shots`).
     time_base : dict, optional
         :func:`probreg.inference.time_base.time_base_check` (its ``reason`` when not real time).
+    lens_conflict : dict, optional
+        A given lens against the height terms (:func:`probreg.inference.heights.lens_conflict`).
 
     Returns
     -------
@@ -551,6 +559,9 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
     ('unreliable', ['left/right labels unsure (legs exchanged in 42 % of frames)'])
     >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, cuts=(40,))
     ('unreliable', ['camera cut at frame 40 (taken as one camera)'])
+    >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, lens_conflict={"deficit_nats": 26.7, "threshold_nats": 7.6,
+    ...              "height_lens_m": 6.69, "height_other_m": 5.62})
+    ('unreliable', ['given lens contradicts the clip (camera height 6.69 m by it, 5.62 m by the rest; 26.7 nats)'])
     """
     t = thresholds
     reasons, uncal = [], False
@@ -606,6 +617,10 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
         reasons.append(f"knee band wide (mean 90 % band {knee_band_deg:.1f} deg)")
     if obliquity_deg is not None and np.isfinite(obliquity_deg) and obliquity_deg > t.max_obliquity_deg:
         reasons.append(f"oblique view ({obliquity_deg:.0f} deg from the side)")
+    if lens_conflict is not None and lens_conflict["deficit_nats"] > lens_conflict["threshold_nats"]:
+        c = lens_conflict
+        reasons.append(f"given lens contradicts the clip (camera height {c['height_lens_m']:.2f} m by it, "
+                       f"{c['height_other_m']:.2f} m by the rest; {c['deficit_nats']:.1f} nats)")
     if knee_peak_deg is not None and np.isfinite(knee_peak_deg) and knee_peak_deg < t.min_knee_peak_deg:
         reasons.append(f"knee flexion peak {knee_peak_deg:.0f} deg")
     for limb, frac in (left_right_exchanged or {}).items():

@@ -169,6 +169,9 @@ def test_a_given_k1_is_a_sharp_prior_on_the_inferred_lens_path(wide_lens_clip, t
     assert run["lens"]["given_k1"] == pytest.approx(k_true) and run["lens"]["informative"]  # a 30 deg barrel lens
     # a given lens: the zoom ratios are read at the height the lines choose, near the camera's own
     assert abs(np.log(run["lens"]["zoom_height_m"] / float(gt.cameras[0].C[2]))) < np.log(1.3)
+    # the right lens agrees with the clip's own height terms: no verdict reason
+    given = run["diagnostics"]["given_lens"]
+    assert given["deficit_nats"] < given["threshold_nats"] and not any("given lens" in r for r in run["verdict_reasons"])
     k1_draws = np.asarray(res.posterior.posterior["k1"]).ravel()
     assert abs(np.median(k1_draws) - k_true) < 0.002 and np.std(k1_draws) < 0.004
     h = np.exp(np.asarray(res.posterior.posterior["log_height"]).ravel())
@@ -187,6 +190,15 @@ def test_a_given_k1_is_a_sharp_prior_on_the_inferred_lens_path(wide_lens_clip, t
     _, _, lens, model = _branch_candidate(clip, register_clip(clip), RunOptions(dist=(k_true, 0, 0, 0, 0)), "auto",
                                           "narrow")
     assert lens.given_k1 == pytest.approx(k_true) and model.dist is None and lens.prior.mean == pytest.approx(k_true)
+    # a lens given at half its k1 (e.g. calibrated at another zoom) puts the camera where the clip's
+    # own terms do not: the conflict the verdict reports
+    _, _, lens, model = _branch_candidate(clip, register_clip(clip), RunOptions(dist=(k_true / 2, 0, 0, 0, 0)), "auto",
+                                          "narrow")
+    model.temper_height_terms()
+    c = model.given_lens_conflict()
+    assert c["deficit_nats"] > c["threshold_nats"] and c["height_lens_m"] > 1.1 * c["height_other_m"]
+    inferred = _branch_candidate(clip, register_clip(clip), RunOptions(), "auto", "narrow")[3]
+    assert inferred.given_lens_conflict() is None  # an inferred lens has nothing to contradict
 
 
 def test_lens_none_is_recorded_and_the_keypoint_share_follows_the_detector_noise(
