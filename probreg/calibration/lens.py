@@ -472,7 +472,7 @@ def undistort_registration(reg, lens: LensModel, min_shift_px=0.02):
     return out
 
 
-def lens_registration(reg, prior: LensPrior = LensPrior(), height_m=10.0, iterations=2, zoom_from_lines=True):
+def lens_registration(reg, prior: LensPrior = LensPrior(), height_m=10.0, iterations=2, zoom_from_lines=False):
     """The lens of a clip and its registration with undistorted lines: ``(lens, registration)``
     (``(None, reg)`` when no frame has lines to measure).
 
@@ -506,8 +506,8 @@ def lens_registration(reg, prior: LensPrior = LensPrior(), height_m=10.0, iterat
         # an RSS difference in the evidence's nats (frames tempered; not by the Birge ratio, which
         # the ratios being chosen inflate)
         nats = lens.evidence.weight * lens.evidence.birge / (2.0 * max(lens.evidence.noise_px, 0.05) ** 2)
-        picked = _zoom_by_lines(out, curvatures, height_m, nats) if curvatures is not None else None
-        zoom, f_ref, zoom_h = picked if picked is not None else (*_zoom_ratios(out, height_m), None)
+        zoom, f_ref, zoom_h = (_zoom_by_lines(out, curvatures, height_m, nats) if curvatures is not None
+                               else (*_zoom_ratios(out, height_m), None))
         if not np.isfinite(f_ref):
             break
         ev = plumb_line_evidence(reg.frame_lanes, zoom=zoom)

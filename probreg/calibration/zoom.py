@@ -108,11 +108,11 @@ def _ratios_of(f):
 
 def _zoom_by_lines(reg, curvatures, height_m, nats_per_rss=np.inf, min_gain=2.0):
     """The frames' zoom ratios read at the height whose ratios let one lens straighten the lines
-    best: ``(ratios, reference focal length, height)``, or None when no height has a regular
-    focal-length series or none beats the ratios of :func:`_zoom_height` by ``min_gain`` in
+    best: ``(ratios, reference focal length, height)``.  When no height has a regular
+    focal-length series or none beats the ratios of :func:`_zoom_ratios` by ``min_gain`` in
     log-likelihood (``nats_per_rss`` converts an RSS difference: the evidence's tempering over
-    twice its points' variance); then those stay (a narrow view's lines carry no curvature to
-    choose by).
+    twice its points' variance), those are returned, with height None (a narrow view's lines
+    carry no curvature to choose by).
 
     Away from the camera's true height, a family's focal lengths change from frame to frame
     with the pan (a camera following the athlete), not only with the zoom: on wide near
@@ -130,29 +130,28 @@ def _zoom_by_lines(reg, curvatures, height_m, nats_per_rss=np.inf, min_gain=2.0)
     ii, a, b = curvatures
     n_ok = max(sum(fl.ok for fl in reg.frame_lanes), 1) / max(len(reg.frame_lanes), 1)
 
-    def score(h, given=None):  # given: the series of the fallback height, taken as it is
-        f = reg.sequence.focal_at_height(h) if given is None else given
+    def score(h, series=None):  # series: the fallback height's (:func:`_zoom_height`), taken as it is
+        f = reg.sequence.focal_at_height(h) if series is None else series
         cover, jumps, _ = _series_quality(f)
-        if given is None and (cover < 0.95 * n_ok or jumps > ZOOM_JUMP_SHARE):
+        if series is None and (cover < 0.95 * n_ok or jumps > ZOOM_JUMP_SHARE):
             return None
         ratios, ref = _ratios_of(f)
         w = 1.0 / ratios[ii] ** 2
         rss_drop = np.sum(b * w) ** 2 / (4.0 * np.sum(a * w * w))  # sum c - min RSS
         return (rss_drop, ratios, ref, float(h))
 
+    base = score(*_zoom_height(reg, height_m))
     scan = sorted(set((float(height_m),) + tuple(float(h) for h in ZOOM_SCAN_HEIGHTS_M)))
     scored = [s for s in map(score, scan) if s is not None]
     if not scored:
-        return None
+        return base[1], base[2], None
     best = max(scored, key=lambda s: s[0])
-    if ZOOM_REFINE:
-        j = scan.index(best[3])
-        lo, hi = scan[max(j - 1, 0)], scan[min(j + 1, len(scan) - 1)]
-        extra = [s for s in map(score, np.geomspace(lo, hi, 2 * ZOOM_REFINE + 1)[1:-1]) if s is not None]
-        best = max([best] + extra, key=lambda s: s[0])
-    base = score(*_zoom_height(reg, height_m))
+    j = scan.index(best[3])
+    lo, hi = scan[max(j - 1, 0)], scan[min(j + 1, len(scan) - 1)]
+    extra = [s for s in map(score, np.geomspace(lo, hi, 2 * ZOOM_REFINE + 1)[1:-1]) if s is not None]
+    best = max([best] + extra, key=lambda s: s[0])
     if (best[0] - base[0]) * nats_per_rss < min_gain:
-        return None
+        return base[1], base[2], None
     return best[1:]
 
 
