@@ -15,6 +15,23 @@ def _command(argv):
     return next((a for a in argv if not a.startswith("-")), None)
 
 
+def keep_dask_out(command):
+    """Keep Dask out of the process of a :data:`FAST_EXIT_COMMANDS` command, unless it is loaded
+    already: returns whether it was kept out.
+
+    Where Dask is installed (``probreg[dask]``), xarray, under ArviZ, imports ``dask``,
+    ``dask.array`` and ``distributed`` to ask whether arrays are chunked and which scheduler
+    writes ``posterior.nc`` (0.5-0.9 s of one core per run; a run's arrays are never chunked).
+    A ``None`` in ``sys.modules`` makes ``import dask`` fail at once, so xarray takes Dask as
+    absent, as in an installation without it.  Only in the ``probreg`` script's own process,
+    which ends with the command (:func:`entry`); ``batch`` and ``bench`` keep Dask.
+    """
+    if command not in FAST_EXIT_COMMANDS or "dask" in sys.modules:
+        return False
+    sys.modules["dask"] = None
+    return True
+
+
 def entry(argv=None):
     """The ``probreg`` script: :func:`probreg.cli.main`, then the process's exit.
 
@@ -23,9 +40,10 @@ def entry(argv=None):
     flushes its output and ends at once (``os._exit``) when nothing else is still running (no
     other thread but daemons such as tqdm's monitor, no child process).  ``batch`` and ``bench``
     (Dask clusters, subprocesses) always exit normally, and so does every command when
-    ``PROBREG_NORMAL_EXIT`` is set.
+    ``PROBREG_NORMAL_EXIT`` is set.  Those commands also run without Dask (:func:`keep_dask_out`).
     """
     argv = sys.argv[1:] if argv is None else list(argv)
+    keep_dask_out(_command(argv))
     code = main(argv)
     if (_command(argv) in FAST_EXIT_COMMANDS and not os.environ.get("PROBREG_NORMAL_EXIT")
             and not _running_threads() and not _children()):

@@ -63,12 +63,15 @@ def read_angles_csv(path):
 
 
 def write_joints_npz(path, median, samples=None, **extra):
-    """``joints3d.npz`` with ``median`` (F, 17, 3), ``joint_names`` and optional ``samples`` (S, F, 17, 3)."""
+    """``joints3d.npz`` with ``median`` (F, 17, 3), ``joint_names`` and optional ``samples`` (S, F, 17, 3).
+
+    Stored uncompressed: the draws' float noise deflates by ~11 % only, at ~0.13 s of the run's
+    critical path for 60 draws of 250 frames (``np.load`` reads either)."""
     arrays = {"median": np.asarray(median, float), "joint_names": np.array(JOINT_NAMES)}
     if samples is not None:
         arrays["samples"] = np.asarray(samples, np.float32)
     arrays.update({k: np.asarray(v) for k, v in extra.items()})
-    np.savez_compressed(path, **arrays)
+    np.savez(path, **arrays)
     return Path(path)
 
 

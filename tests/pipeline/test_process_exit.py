@@ -57,3 +57,35 @@ def test_the_fast_exit_skips_the_teardown_and_the_normal_one_does_not(tmp_path):
         assert out.returncode == 0, out.stderr
         assert ("teardown ran" in out.stdout) == ran
         assert "wrote 20 frames" in out.stdout
+
+
+def test_single_process_commands_write_the_posterior_without_dask(tmp_path):
+    """xarray (under ArviZ) imports Dask when it is installed; ``probreg run`` keeps it out of its
+    process (:func:`probreg.__main__.keep_dask_out`), and ``posterior.nc`` is written all the same."""
+    import arviz as az
+
+    code = ("import sys\nfrom probreg.__main__ import keep_dask_out\nkept = keep_dask_out(sys.argv[1])\n"
+            "import arviz as az, numpy as np\n"
+            "az.from_dict(posterior={'h': np.arange(10.0).reshape(2, 5)}).to_netcdf(sys.argv[2])\n"
+            "print(kept, sys.modules.get('dask', 'absent') is None, 'distributed' in sys.modules)\n")
+    for command, kept in (("run", "True True False"), ("batch", "False False")):
+        out = subprocess.run([sys.executable, "-c", code, command, str(tmp_path / f"{command}.nc")],
+                             capture_output=True, text=True, check=False)
+        assert out.returncode == 0, out.stderr
+        assert out.stdout.startswith(kept)
+        post = az.from_netcdf(tmp_path / f"{command}.nc").posterior
+        assert np.array_equal(post["h"].values, np.arange(10.0).reshape(2, 5))
+
+
+def test_dask_is_kept_out_only_of_a_fresh_single_process_command(monkeypatch):
+    import types
+
+    from probreg.__main__ import keep_dask_out
+
+    loaded = types.ModuleType("dask")
+    monkeypatch.setitem(sys.modules, "dask", loaded)  # a notebook or a Dask worker has it loaded
+    assert keep_dask_out("run") is False and sys.modules["dask"] is loaded
+    monkeypatch.delitem(sys.modules, "dask")
+    assert keep_dask_out("batch") is False and "dask" not in sys.modules
+    assert keep_dask_out("run") is True and sys.modules["dask"] is None
+    monkeypatch.delitem(sys.modules, "dask")  # the test process keeps its Dask
