@@ -55,18 +55,6 @@ def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypo
         the previous frame's (:func:`probreg.lanes.shots.histogram_change`; NaN for the first
         frame and next to an unreadable one), the evidence for camera cuts.
     """
-    # OpenCV's calls here are small (a resize, a phase correlation: ~1 ms at 1080p), and the lane
-    # step runs in two processes on two cores already (:func:`probreg.calibration.register_clip`):
-    # OpenCV's worker threads cost more in hand-offs than they save (run_a: 5.8 -> 5.4 s of CPU)
-    threads = cv2.getNumThreads()
-    cv2.setNumThreads(1)
-    try:
-        return _track(frames, config, keypoints_px, warmup)
-    finally:
-        cv2.setNumThreads(threads)
-
-
-def _track(frames, config, keypoints_px, warmup):
     out = []
     prev = last_ok = None
     next_id = 0

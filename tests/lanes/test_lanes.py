@@ -128,35 +128,6 @@ def test_tracking_keeps_line_identities_and_smoothing_keeps_statuses(cam):
     assert "vp_raw" in sm[0].extra
 
 
-def test_tracking_runs_opencv_on_one_thread_and_gives_the_callers_threads_back(cam):
-    """The lane step's OpenCV calls are too small for worker threads (:func:`track_lanes`): one
-    thread while the frames are followed, the caller's setting restored, also when the frames fail."""
-    rng = np.random.default_rng(5)
-    frames = [(k, _render(Camera.look_at([42, -62, 13], [35 + 0.3 * k, -4, 0.5], fov_deg=14.0), rng))
-              for k in range(3)]
-    seen = []
-
-    def watched():
-        for item in frames:
-            seen.append(cv2.getNumThreads())
-            yield item
-
-    def failing():
-        yield frames[0]
-        raise OSError("disk gone")
-
-    before = cv2.getNumThreads()
-    try:
-        cv2.setNumThreads(2)
-        fls = track_lanes(watched())
-        assert seen == [1, 1, 1] and cv2.getNumThreads() == 2
-        with pytest.raises(OSError, match="disk gone"):
-            track_lanes(failing())
-        assert cv2.getNumThreads() == 2 and all(f.ok for f in fls)
-    finally:
-        cv2.setNumThreads(before)
-
-
 def test_paper_frames_give_three_lines_and_a_family(shared_data):
     frames = sorted((shared_data / "paper_frames").glob("*.jpeg"))
     assert len(frames) == 14
