@@ -601,6 +601,8 @@ def build_parser():
     b.add_argument("--keep-outputs", type=Path, help="'bench validation': keep each run's result folder (DIR/<clip>)")
     b.add_argument("--reseed", type=int, default=None,
                    help="'bench validation': run every clip again with this seed and report how far the results move")
+    b.add_argument("--baseline", type=Path, default=None, help="'bench speed': a source tree of another revision "
+                   "(git worktree add DIR REV): the clip runs alternately with it and with this one")
     b.add_argument("--jitter-px", type=float, default=None,
                    help="'bench validation': run every clip again with its keypoints moved by this much noise (px)")
     b.set_defaults(func=_cmd_bench)

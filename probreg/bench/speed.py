@@ -22,6 +22,13 @@ waited for) is read for each run: on two cores, the wall time cannot fall below 
 Then how many posterior draws the bands need: the knee bands of the run's 60 draws recomputed
 from subsets of 15, 30 and 45 draws (the draws' own joints from ``joints3d.npz``), with their
 mean width and how far their edges move from the 60-draw band.
+
+The machine's own speed drifts (a shared virtual machine ran the same code 1.5x slower one hour
+than another), so the bench times a fixed single-core reference workload (pure Python, a matrix
+product, decoding the clip's first frame) at its start and at its end: reports of different
+hours compare through it.  With ``--baseline DIR`` (a source tree of another revision, e.g. a
+``git worktree``) the clip also runs alternately with that tree's ``probreg`` and with this one,
+``--repeats`` pairs (default 3): the change measured within the same minutes.
 """
 
 from __future__ import annotations
@@ -53,6 +60,86 @@ def _wall(cmd, cpu=None):
     if cpu is not None:
         cpu.append(_children_cpu() - c0)
     return wall, proc.returncode
+
+
+def _reference_s(jpeg_path, repeats=3):
+    """Best-of-``repeats`` seconds of a fixed single-core workload: a pure-Python loop, 20 products
+    of a 300x300 matrix (one BLAS thread) and 20 decodes of the JPEG ``jpeg_path``.
+
+    >>> import cv2, tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     _ = cv2.imwrite(f"{d}/f.jpg", np.zeros((64, 64, 3), np.uint8))
+    ...     t = _reference_s(f"{d}/f.jpg", repeats=1)
+    >>> 0 < t < 60
+    True
+    """
+    import cv2
+    from threadpoolctl import threadpool_limits
+
+    data = np.fromfile(str(jpeg_path), np.uint8)
+    a = np.random.default_rng(0).random((300, 300))
+    best = float("inf")
+    with threadpool_limits(limits=1):
+        for _ in range(repeats):
+            t0 = time.perf_counter()
+            sum(i * i for i in range(1_000_000))
+            for _ in range(20):
+                a @ a
+                cv2.imdecode(data, cv2.IMREAD_COLOR)
+            best = min(best, time.perf_counter() - t0)
+    return best
+
+
+def source_tree(path):
+    """``path`` as a source tree holding the ``probreg`` package (for ``--baseline``).
+
+    Raises
+    ------
+    ValueError
+        When ``path`` has no ``probreg/__init__.py``.
+    """
+    path = Path(path).resolve()
+    if not (path / "probreg" / "__init__.py").is_file():
+        raise ValueError(f"--baseline {path}: no probreg/__init__.py there (give a checkout of probreg, "
+                         "e.g. 'git worktree add DIR REV')")
+    return path
+
+
+def _paired(commands, pairs):
+    """Each of ``commands`` ({label: (argv, env)}) run ``pairs`` times, alternating in that order:
+    ``{label: (walls, cpus, exit codes)}``."""
+    out = {k: ([], [], []) for k in commands}
+    for _ in range(int(pairs)):
+        for label, (cmd, env) in commands.items():
+            c0, t0 = _children_cpu(), time.perf_counter()
+            code = subprocess.run(cmd, capture_output=True, text=True, env=env).returncode
+            out[label][0].append(time.perf_counter() - t0)
+            out[label][1].append(_children_cpu() - c0)
+            out[label][2].append(code)
+    return out
+
+
+def _baseline_section(py, clip, tmp, baseline, pairs):
+    """The clip run alternately with the ``baseline`` tree and with this one: a table and numbers."""
+    import os
+
+    here = Path(__file__).resolve().parents[2]
+    commands = {}
+    for label, tree in (("baseline", baseline), ("this tree", here)):
+        out = Path(tmp) / f"paired_{label.replace(' ', '_')}"
+        argv = [py, "-m", "probreg", "run", str(clip), "--out", str(out), "--seed", "0", "--quiet", "--overwrite"]
+        commands[label] = (argv, {**os.environ, "PYTHONPATH": str(tree)})
+    res = _paired(commands, pairs)
+    rows = [[label, ", ".join(f"{w:.2f}" for w in walls), float(np.mean(walls)), float(np.mean(cpus)),
+             ", ".join(map(str, sorted(set(codes))))] for label, (walls, cpus, codes) in res.items()]
+    dw = np.subtract(res["this tree"][0], res["baseline"][0])
+    dc = np.subtract(res["this tree"][1], res["baseline"][1])
+    table = md_table(["code", "CLI wall s, in run order", "mean wall s", "mean CPU s", "exit"], rows)
+    text = (f"{table}\nThis tree minus the baseline, pair by pair: wall {float(np.mean(dw)):+.2f} s "
+            f"(sd {float(np.std(dw, ddof=1)) if len(dw) > 1 else float('nan'):.2f}), CPU {float(np.mean(dc)):+.2f} s "
+            f"(sd {float(np.std(dc, ddof=1)) if len(dc) > 1 else float('nan'):.2f}) over {len(dw)} pairs.\n")
+    return text, {"baseline_walls": res["baseline"][0], "baseline_cpus": res["baseline"][1],
+                  "paired_walls": res["this tree"][0], "paired_cpus": res["this tree"][1]}
 
 
 def _typical_clip(args, tmp):
@@ -128,11 +215,14 @@ def run(args=None):
     rep.add(__doc__.split("\n\n", 1)[1])
     import cv2
 
+    baseline = source_tree(args.baseline) if getattr(args, "baseline", None) else None
     with tempfile.TemporaryDirectory(prefix="probreg-bench-speed-") as tmp:
         clip = _typical_clip(args, tmp)
         meta = json.loads((clip / "clip.json").read_text())
         F = int(meta.get("n_frames") or len(list((clip / "frames").glob("*"))))
         py = sys.executable
+        first = sorted((clip / "frames").glob("*.jpg"))[0]
+        ref_start = _reference_s(first)
         t_help = min(_wall([py, "-m", "probreg", "--help"])[0] for _ in range(3))
         t_imports = min(_wall([py, "-c", "import probreg.pipeline, probreg.report.html, arviz, emcee, cv2, "
                                          "scipy.optimize"])[0] for _ in range(2))
@@ -197,4 +287,16 @@ def run(args=None):
                 "draws. The bands of `angles.csv` add the calibrated scale to these.\n")
         rep.add(md_table(["draws", "mean band width deg", "mean edge shift vs all draws deg"],
                          _band_stability(best_out)))
+        if baseline is not None:
+            pairs = getattr(args, "repeats", None) or 3
+            rep.add(f"## Against another revision, the same minutes\n\nBaseline: `{baseline}`; {pairs} pairs, "
+                    "the baseline first in each.\n")
+            text, numbers = _baseline_section(py, clip, tmp, baseline, pairs)
+            rep.add(text)
+            rep.numbers.update(numbers)
+        ref_end = _reference_s(first)
+    rep.add("## The machine's speed\n")
+    rep.add(f"Reference workload (fixed, one core; the smaller the faster): {ref_start:.3f} s at the start, "
+            f"{ref_end:.3f} s at the end of this bench.\n")
+    rep.numbers.update(reference_s=[ref_start, ref_end])
     return rep

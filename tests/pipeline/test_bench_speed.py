@@ -24,3 +24,26 @@ def test_cpu_of_a_command_includes_its_forked_workers():
     assert cpu[0] >= 0.3
     # and nothing is counted when no list is given
     assert _wall([sys.executable, "-c", "pass"])[1] == 0
+
+
+def test_paired_runs_alternate_and_count_each_commands_cpu(tmp_path):
+    import os
+
+    import pytest
+
+    from probreg.bench.speed import _paired, source_tree
+
+    log = tmp_path / "order.txt"
+    step = "import sys, time\nopen(sys.argv[1], 'a').write(sys.argv[2])\nt = time.process_time()\n" \
+           "while time.process_time() - t < float(sys.argv[3]):\n    pass\nsys.exit(int(sys.argv[4]))\n"
+    commands = {"a": ([sys.executable, "-c", step, str(log), "a", "0.0", "0"], dict(os.environ)),
+                "b": ([sys.executable, "-c", step, str(log), "b", "0.3", "3"], dict(os.environ))}
+    res = _paired(commands, 2)
+    assert log.read_text() == "abab"  # baseline first in every pair
+    assert res["b"][2] == [3, 3] and res["a"][2] == [0, 0]
+    assert min(res["b"][1]) >= 0.3 and all(w > 0 for w in res["a"][0] + res["b"][0])
+    with pytest.raises(ValueError, match="no probreg/__init__.py"):
+        source_tree(tmp_path)
+    (tmp_path / "probreg").mkdir()
+    (tmp_path / "probreg" / "__init__.py").write_text("")
+    assert source_tree(tmp_path) == tmp_path.resolve()
