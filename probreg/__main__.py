@@ -43,9 +43,10 @@ def entry(argv=None):
     ``PROBREG_NORMAL_EXIT`` is set.  Those commands also run without Dask (:func:`keep_dask_out`).
     """
     argv = sys.argv[1:] if argv is None else list(argv)
-    keep_dask_out(_command(argv))
+    command = _command(argv)
+    keep_dask_out(command)
     code = main(argv)
-    if (_command(argv) in FAST_EXIT_COMMANDS and not os.environ.get("PROBREG_NORMAL_EXIT")
+    if (command in FAST_EXIT_COMMANDS and not os.environ.get("PROBREG_NORMAL_EXIT")
             and not _running_threads() and not _children()):
         sys.stdout.flush()
         sys.stderr.flush()

@@ -52,10 +52,11 @@ def _children_cpu():
     return u.ru_utime + u.ru_stime
 
 
-def _wall(cmd, cpu=None):
-    """Wall time and exit code of ``cmd``; its CPU seconds (all its processes) go to ``cpu``."""
+def _wall(cmd, cpu=None, env=None):
+    """Wall time and exit code of ``cmd`` (in environment ``env``, default this one's); its CPU
+    seconds (all its processes) go to ``cpu``."""
     c0, t0 = _children_cpu(), time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True)
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
     wall = time.perf_counter() - t0
     if cpu is not None:
         cpu.append(_children_cpu() - c0)
@@ -111,11 +112,10 @@ def _paired(commands, pairs):
     out = {k: ([], [], []) for k in commands}
     for _ in range(int(pairs)):
         for label, (cmd, env) in commands.items():
-            c0, t0 = _children_cpu(), time.perf_counter()
-            code = subprocess.run(cmd, capture_output=True, text=True, env=env).returncode
-            out[label][0].append(time.perf_counter() - t0)
-            out[label][1].append(_children_cpu() - c0)
-            out[label][2].append(code)
+            walls, cpus, codes = out[label]
+            wall, code = _wall(cmd, cpu=cpus, env=env)
+            walls.append(wall)
+            codes.append(code)
     return out
 
 
@@ -132,12 +132,11 @@ def _baseline_section(py, clip, tmp, baseline, pairs):
     res = _paired(commands, pairs)
     rows = [[label, ", ".join(f"{w:.2f}" for w in walls), float(np.mean(walls)), float(np.mean(cpus)),
              ", ".join(map(str, sorted(set(codes))))] for label, (walls, cpus, codes) in res.items()]
-    dw = np.subtract(res["this tree"][0], res["baseline"][0])
-    dc = np.subtract(res["this tree"][1], res["baseline"][1])
+    diff = [np.subtract(res["this tree"][k], res["baseline"][k]) for k in (0, 1)]  # wall, CPU; pair by pair
+    mean_sd = [(float(np.mean(d)), float(np.std(d, ddof=1)) if len(d) > 1 else float("nan")) for d in diff]
     table = md_table(["code", "CLI wall s, in run order", "mean wall s", "mean CPU s", "exit"], rows)
-    text = (f"{table}\nThis tree minus the baseline, pair by pair: wall {float(np.mean(dw)):+.2f} s "
-            f"(sd {float(np.std(dw, ddof=1)) if len(dw) > 1 else float('nan'):.2f}), CPU {float(np.mean(dc)):+.2f} s "
-            f"(sd {float(np.std(dc, ddof=1)) if len(dc) > 1 else float('nan'):.2f}) over {len(dw)} pairs.\n")
+    text = (f"{table}\nThis tree minus the baseline, pair by pair: wall {mean_sd[0][0]:+.2f} s (sd {mean_sd[0][1]:.2f}), "
+            f"CPU {mean_sd[1][0]:+.2f} s (sd {mean_sd[1][1]:.2f}) over {len(diff[0])} pairs.\n")
     return text, {"baseline_walls": res["baseline"][0], "baseline_cpus": res["baseline"][1],
                   "paired_walls": res["this tree"][0], "paired_cpus": res["this tree"][1]}
 

@@ -503,11 +503,13 @@ def lens_registration(reg, prior: LensPrior = LensPrior(), height_m=10.0, iterat
         strong = abs(lens.kappa_star) * lens.evidence.r_ref >= ZOOM_SCAN_MIN_SHIFT_PX
         if zoom_from_lines and strong and curvatures is None:
             curvatures = _frame_curvatures(reg.frame_lanes, lens.kappa_star)
-        # an RSS difference in the evidence's nats (frames tempered; not by the Birge ratio, which
-        # the ratios being chosen inflate)
-        nats = lens.evidence.weight * lens.evidence.birge / (2.0 * max(lens.evidence.noise_px, 0.05) ** 2)
-        zoom, f_ref, zoom_h = (_zoom_by_lines(out, curvatures, height_m, nats) if curvatures is not None
-                               else (*_zoom_ratios(out, height_m), None))
+        if curvatures is not None:
+            # an RSS difference in the evidence's nats (frames tempered; not by the Birge ratio, which
+            # the ratios being chosen inflate)
+            nats = lens.evidence.weight * lens.evidence.birge / (2.0 * max(lens.evidence.noise_px, 0.05) ** 2)
+            zoom, f_ref, zoom_h = _zoom_by_lines(out, curvatures, height_m, nats)
+        else:
+            zoom, f_ref, zoom_h = (*_zoom_ratios(out, height_m), None)
         if not np.isfinite(f_ref):
             break
         ev = plumb_line_evidence(reg.frame_lanes, zoom=zoom)

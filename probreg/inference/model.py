@@ -217,7 +217,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
         x, ll = self._height_terms()
         with np.errstate(invalid="ignore", divide="ignore"):
             z = self.lens.evidence.log_likelihood(self.lens.evidence.kappa_of(self.lens.given_k1, self.f_ref_grid))
-        return lens_conflict(x, ll, np.interp(x, np.log(self.grid), z, left=np.nan, right=np.nan))
+        return lens_conflict(x, ll, self._interp(z, x))
 
     def k1_at(self, height_m):
         """``k1`` the lines' undistortion implies at ``height_m`` (the family's reference focal
