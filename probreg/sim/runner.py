@@ -152,6 +152,14 @@ class GaitParams:
     pelvis_yaw_deg: float = 5.0
     heel_rise_deg: float = 40.0
     lateral_drift_m: float = 0.05
+    # legs off the sagittal plane: the knee medial of the hip, the ankle medial of the knee (m, with
+    # the segment vertical), plus a stride-periodic part peaking in mid-stance.  CMU running mocap
+    # in shared/data (14 legs): knee 0.4-4.4 cm medial (mean 2.1), ankle 0.1-4.0 cm medial of the
+    # knee (mean 1.7), within-clip sd 2-3.4 cm (mean 2.7) (`probreg bench realism`, section e).  Until
+    # 0.2.0.dev24 every generated leg swung in its sagittal plane.
+    knee_medial_m: float = 0.021
+    ankle_medial_m: float = 0.017
+    leg_medial_swing_m: float = 0.038
     # stride-to-stride variability (applied when the simulation has an rng), set so that the
     # generated runner matches the CMU running mocap in shared/data on the same measure (sd of
     # the angle curve one stride apart, / sqrt 2: knee 2.1 deg, hip 1.7 deg; deviations
@@ -241,7 +249,13 @@ def gait_for_style(style, rng=None, speed_mps=None):
     (lo, hi), factory = STYLES[style]
     if speed_mps is None:
         speed_mps = 0.5 * (lo + hi) if rng is None else float(rng.uniform(lo, hi))
-    return factory(speed_mps)
+    g = factory(speed_mps)
+    if rng is not None:  # this runner's legs off the sagittal plane (the mocap's range, see GaitParams),
+        # from a stream of their own: ``rng`` is not advanced, so every other draw is as before
+        own = np.random.Generator(rng.bit_generator.jumped())
+        g = replace(g, knee_medial_m=float(own.uniform(0.0, 0.045)), ankle_medial_m=float(own.uniform(0.0, 0.045)),
+                    leg_medial_swing_m=float(own.uniform(0.025, 0.05)))
+    return g
 
 
 @dataclass(frozen=True)
@@ -473,8 +487,26 @@ def simulate_runner(anthropometry, gait, n_frames, fps=50.0, rng=None, start_x_m
         lateral = (-0.5 if side == 0 else 0.5) * a.hip_width_m
         return np.stack([-lateral * np.sin(psi), lateral * np.cos(psi)], -1)  # (x, y)
 
+    def leg_vectors(t, side, th=None, kn=None):
+        """Hip -> knee and knee -> ankle (n, 3): the sagittal leg turned medially about the
+        forward axis (the right leg's medial side is +y)."""
+        ph = phase_of(t, side)
+        if th is None:
+            th, kn = leg_angles(t, side)
+        swing = g.leg_medial_swing_m * np.cos(2 * np.pi * (ph - 0.15))
+        vecs = []
+        for length, ang, medial in ((a.thigh_m, th, g.knee_medial_m), (a.shank_m, th - kn, g.ankle_medial_m)):
+            phi = np.arcsin(np.clip((medial + swing) / length, -0.5, 0.5)) * (1.0 if side == 0 else -1.0)
+            down = length * np.cos(ang)
+            vecs.append(np.stack([length * np.sin(ang), down * np.sin(phi), -down * np.cos(phi)], -1))
+        return vecs
+
+    def ankle_rel(t, side):
+        v1, v2 = leg_vectors(np.atleast_1d(t), side)
+        return (v1 + v2)[0] if np.ndim(t) == 0 else v1 + v2
+
     def leg_height(t, side):
-        return -_leg_rel(*leg_angles(t, side), a)[1]
+        return -ankle_rel(t, side)[2]
 
     pelvis = np.full((len(times), 3), np.nan)
     stance_side = np.full(len(times), -1)
@@ -489,25 +521,25 @@ def simulate_runner(anthropometry, gait, n_frames, fps=50.0, rng=None, start_x_m
         tc_k = tc * (t_next - t_td) / step_s
         t_to = t_td + tc_k
         off = hip_offset(t_td, side)
-        fwd, _ = _leg_rel(*leg_angles(t_td, side), a)
-        ankle = np.array([p_td[0] + off[0] + fwd, p_td[1] + off[1], a.ankle_height_m])
+        rel = ankle_rel(t_td, side)
+        ankle = np.array([p_td[0] + off[0] + rel[0], p_td[1] + off[1] + rel[1], a.ankle_height_m])
         touchdowns.append((t_td, "right" if side == 0 else "left", ankle))
         # stance: the pelvis is placed so that the ankle stays put
         sel = (times >= t_td) & (times < t_to)
         if np.any(sel):
             ts = times[sel]
-            f, u = _leg_rel(*leg_angles(ts, side), a)
+            f, lat, u = ankle_rel(ts, side).T
             o = hip_offset(ts, side)
             hx, hz = _heel_rise((ts - t_td) / tc_k, g, a)
-            pelvis[sel] = np.stack([ankle[0] + hx - f - o[:, 0], ankle[1] - o[:, 1],
+            pelvis[sel] = np.stack([ankle[0] + hx - f - o[:, 0], ankle[1] - lat - o[:, 1],
                                     a.ankle_height_m + hz - u], -1)
             balls[sel, side] = ankle + [a.ankle_to_ball_m, 0.0, -a.ankle_height_m]
             stance_side[sel] = side
         # pelvis at toe-off
-        f, u = _leg_rel(*leg_angles(t_to, side), a)
+        f, lat, u = ankle_rel(t_to, side)
         o = hip_offset(t_to, side)
         hx, hz = _heel_rise(1.0, g, a)
-        p_to = np.array([ankle[0] + hx - f - o[0], ankle[1] - o[1], a.ankle_height_m + hz - u])
+        p_to = np.array([ankle[0] + hx - f - o[0], ankle[1] - lat - o[1], a.ankle_height_m + hz - u])
         # flight: ballistic in z, constant velocity in x, linear drift in y
         t_fl = t_next - t_to
         p_next = np.array([p_to[0] + v_flight * t_fl, lane_y_m + drift_knots[min(k + 1, n_steps - 1)],
@@ -530,9 +562,9 @@ def simulate_runner(anthropometry, gait, n_frames, fps=50.0, rng=None, start_x_m
         th, kn = leg_angles(times, side)
         if dev is not None:
             kn = kn + _clearance_flexion(hip, th, kn, stance_side != side, a)
-        knee = hip + np.stack([a.thigh_m * np.sin(th), np.zeros_like(th), -a.thigh_m * np.cos(th)], -1)
-        ankle = knee + np.stack([a.shank_m * np.sin(th - kn), np.zeros_like(th),
-                                 -a.shank_m * np.cos(th - kn)], -1)
+        v1, v2 = leg_vectors(times, side, th, kn)
+        knee = hip + v1
+        ankle = knee + v2
         joints[:, J[f"{prefix}_hip"]] = hip
         joints[:, J[f"{prefix}_knee"]] = knee
         joints[:, J[f"{prefix}_ankle"]] = ankle

@@ -18,8 +18,10 @@ def test_true_camera_floor_is_zero_for_exact_keypoints_and_not_for_noisy(small_c
         truth = np.concatenate([truth, np.ones(truth.shape[:-1] + (1,))], axis=-1)
     write_keypoints_json(exact / "keypoints2d.json", truth)
     floor = _true_camera_knee(exact, tmp_path / "exact_work")
-    # the lifting with the true cameras and exact 2D is exact (ray casting, no smoothing needed)
-    assert floor < 0.5
+    # the lifting with the true cameras and exact 2D is nearly exact: ray casting, no smoothing
+    # needed; what is left (0.5 deg on this clip) is the limb plane's pull along the rays on legs
+    # that leave their plane, as generated legs do since 0.2.0.dev24 (docs/method.md)
+    assert floor < 1.0
     # the clip's simulated detector noise costs degrees even with the true cameras
     assert 1.0 < noisy < 8.0
     # a clip without a usable lifting gives NaN, not an exception

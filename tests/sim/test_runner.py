@@ -150,3 +150,34 @@ def test_real_midstance_ankle_slide_within_model_sd(shared_data):
     assert abs(np.median(slides)) < 0.5 * STILLNESS_SYS_SD
     # early stance is not still in real running: that is why the window skips it
     assert np.median(np.concatenate(early)) > 0.5
+
+
+def test_legs_leave_their_plane_by_the_given_offsets():
+    """Knee and ankle sit medially by the gait's offsets where the segment hangs vertical (no
+    stride-periodic part here), the segment lengths and the planted foot are kept."""
+    from dataclasses import replace
+
+    from probreg.bench.realism import leg_medial_offsets
+
+    g = replace(gait_for_style("run"), knee_medial_m=0.03, ankle_medial_m=0.015, leg_medial_swing_m=0.0)
+    a = Anthropometry.from_stature(1.8)
+    m = simulate_runner(a, g, 200, 50.0)
+    X = m.joints_track_m
+    for side, medial in (("l", -1.0), ("r", 1.0)):
+        hip, knee, ankle = (X[:, JOINT_INDEX[f"{side}_{n}"]] for n in ("hip", "knee", "ankle"))
+        vertical = np.abs(knee[:, 0] - hip[:, 0]) < 0.01 * a.thigh_m  # thigh hanging straight down
+        assert vertical.any()
+        np.testing.assert_allclose(medial * (knee - hip)[vertical, 1], 0.03, atol=3e-4)
+        np.testing.assert_allclose(np.linalg.norm(knee - hip, axis=-1), a.thigh_m, atol=1e-9)
+        np.testing.assert_allclose(np.linalg.norm(ankle - knee, axis=-1), a.shank_m, atol=1e-9)
+    o = leg_medial_offsets(X)  # means over the stride: below the vertical segment's offset
+    assert np.all((o[:, 0] > 2.0) & (o[:, 0] < 3.0) & (o[:, 2] > 0.5) & (o[:, 2] < 1.5))
+    for side, name in ((0, "l_ankle"), (1, "r_ankle")):  # the stance ankle does not slide sideways
+        y = X[:, JOINT_INDEX[name], 1]
+        c = m.contacts[:, side]
+        for s, e in gait_cycles(c):
+            stance = y[s:e][c[s:e]]
+            assert np.ptp(stance) < 1e-9
+    # without offsets the legs swing in their plane, as up to 0.2.0.dev23
+    flat = simulate_runner(a, replace(g, knee_medial_m=0.0, ankle_medial_m=0.0), 200, 50.0).joints_track_m
+    assert np.max(np.abs(flat[:, JOINT_INDEX["l_knee"], 1] - flat[:, JOINT_INDEX["l_hip"], 1])) < 1e-9
