@@ -82,6 +82,15 @@ class LiftConfig:
     # picked the mirror branch for arms that cross the body (synthetic odd-arms clip, true
     # cameras: right elbow 17.8 -> 9.3 deg; other clips unchanged, 2.89 -> 2.88 deg).
     forearm_medial_offset_m: float = 0.037
+    # Expected offsets of the knee medial of the hip and of the ankle medial of the knee (the
+    # mean of the CMU running mocap in shared/data, 14 legs: 2.1 cm, range 0.4-4.4, and 1.7 cm,
+    # range 0.1-4.0; `probreg bench realism` section e).  Centring the legs' plane term there
+    # rather than on the plane (0.2.0.dev24), with the true cameras and limb lengths: exact 2D
+    # knee 1.25 -> 1.15 deg, hip 1.06 -> 0.85 deg on 30 tuning twins (7501-7530), noisy 2D knee
+    # 3.72 -> 3.69, hip 2.89 -> 2.69; validation clips (checked) noisy knee 2.99 -> 2.97, hip
+    # 2.36 -> 2.28, exact knee 0.73 -> 0.43 (docs/method.md, "Limb joints off their rays").
+    knee_medial_offset_m: float = 0.021
+    ankle_medial_offset_m: float = 0.017
     min_score: float = 0.3
     ankle_height_m: float = 0.07
     smooth_cutoff_hz: float | str | None = "auto"  # keypoint low-pass before lifting (None: off)
@@ -198,11 +207,11 @@ def estimate_segments(cameras, keypoints_px, track: GroundTrack | None = None, f
     return out
 
 
-def _refine_on_ray(origins, dirs, root, length, normal, t0, sd_len, sd_lat, iters=6):
+def _refine_on_ray(origins, dirs, root, length, normal, t0, sd_len, sd_lat, iters=6, offset=0.0):
     """Depth along each ray that best meets both the limb-length sphere around ``root`` and
     the limb's sagittal plane (through ``root``, normal ``normal``): Gauss-Newton on
 
-    ``((|q| - L) / sd_len)^2 + ((q . n) / sd_lat)^2``,  ``q = o + t d - root``.
+    ``((|q| - L) / sd_len)^2 + ((q . n - offset) / sd_lat)^2``,  ``q = o + t d - root``.
 
     With exact keypoints the sphere term is met exactly; with noisy ones it stops the
     depth from running away where a ray grazes its sphere (the limb almost parallel to
@@ -217,7 +226,7 @@ def _refine_on_ray(origins, dirs, root, length, normal, t0, sd_len, sd_lat, iter
         nq = np.linalg.norm(q, axis=-1)
         qd = np.sum(q * dirs, -1) / np.maximum(nq, 1e-9)
         r1 = (nq - length) / sd_len
-        r2 = np.sum(q * normal, -1) / sd_lat
+        r2 = (np.sum(q * normal, -1) - offset) / sd_lat
         j1 = qd / sd_len
         j2 = dn / sd_lat
         step = (r1 * j1 + r2 * j2) / np.maximum(j1 * j1 + j2 * j2, 1e-12)
@@ -226,11 +235,13 @@ def _refine_on_ray(origins, dirs, root, length, normal, t0, sd_len, sd_lat, iter
     return origins + t[..., None] * dirs, np.linalg.norm(q, axis=-1) - length
 
 
-def _chain_candidates(origins, rays, root, L1, L2, i_mid, i_end, normal, sd_len, sd_lat):
+def _chain_candidates(origins, rays, root, L1, L2, i_mid, i_end, normal, sd_len, sd_lat, offsets=(0.0, 0.0)):
     """Four candidate (mid, end) pairs per frame: (F, 4, 2, 3), and misfits (F, 4).
 
     Each joint starts from both ray-sphere solutions (the closest point when the ray
-    misses) and is refined against sphere and sagittal plane together.
+    misses) and is refined against sphere and sagittal plane together; ``offsets`` are the
+    middle joint's expected offset from the root's plane and the end joint's from the middle's
+    (along ``normal``).
     """
     F = len(origins)
     cands = np.empty((F, 4, 2, 3))
@@ -246,9 +257,9 @@ def _chain_candidates(origins, rays, root, L1, L2, i_mid, i_end, normal, sd_len,
     # both starts of the middle joint refined at once (leading axis a), then both starts of
     # the end joint from each of them (axes b, a)
     mid, m1 = _refine_on_ray(origins, d_mid, root, L1, normal, np.stack(starts(d_mid, root, L1)),
-                             sd_len, sd_lat)  # (2, F, 3), (2, F)
+                             sd_len, sd_lat, offset=offsets[0])  # (2, F, 3), (2, F)
     end, m2 = _refine_on_ray(origins, d_end, mid, L2, normal, np.stack(starts(d_end, mid, L2)),
-                             sd_len, sd_lat)  # (2, 2, F, 3), (2, 2, F)
+                             sd_len, sd_lat, offset=offsets[1])  # (2, 2, F, 3), (2, 2, F)
     for a in range(2):
         for b in range(2):
             cands[:, 2 * a + b, 0] = mid[a]
@@ -515,8 +526,12 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
         r = joints[:, J[root]]
         arm = name.startswith("arm")
         lat_std = config.arm_lateral_std_m if arm else config.leg_lateral_std_m
+        # a leg's knee and ankle sit medially: their expected offsets along ``left`` (knee from hip,
+        # ankle from knee; the midline is to the right of a left leg)
+        offs = (0.0, 0.0) if arm else tuple((-1.0 if name.endswith("_l") else 1.0) * np.array(
+            [config.knee_medial_offset_m, config.ankle_medial_offset_m]))
         cands, cmiss = _chain_candidates(origins, rays, r, seg[s1], seg[s2], J[mid], J[end], left,
-                                         config.length_std_m, lat_std)
+                                         config.length_std_m, lat_std, offsets=offs)
         u = cands[:, :, 0] - r[:, None]  # root -> mid
         v = cands[:, :, 1] - cands[:, :, 0]  # mid -> end
         bend = np.sum(np.cross(u, v) * left[:, None], -1) / (seg[s1] * seg[s2])  # sin of signed flexion
@@ -528,6 +543,8 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
             medial = -1.0 if name.endswith("_l") else 1.0
             lateral = np.stack([lateral[..., 0],
                                 lateral[..., 1] - lateral[..., 0] - medial * config.forearm_medial_offset_m], -1)
+        else:
+            lateral = lateral - np.array([offs[0], offs[0] + offs[1]])
         e += np.sum(lateral**2, -1) / lat_std**2
         if name.startswith("leg"):
             e += config.rom_penalty * (bend < -config.knee_flex_tol)
