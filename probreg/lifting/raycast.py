@@ -526,10 +526,9 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
         r = joints[:, J[root]]
         arm = name.startswith("arm")
         lat_std = config.arm_lateral_std_m if arm else config.leg_lateral_std_m
-        # a leg's knee and ankle sit medially: their expected offsets along ``left`` (knee from hip,
-        # ankle from knee; the midline is to the right of a left leg)
-        offs = (0.0, 0.0) if arm else tuple((-1.0 if name.endswith("_l") else 1.0) * np.array(
-            [config.knee_medial_offset_m, config.ankle_medial_offset_m]))
+        medial = -1.0 if name.endswith("_l") else 1.0  # along ``left``: the midline is right of a left limb
+        # a leg's knee and ankle sit medially: their expected offsets (knee from hip, ankle from knee)
+        offs = (0.0, 0.0) if arm else (medial * config.knee_medial_offset_m, medial * config.ankle_medial_offset_m)
         cands, cmiss = _chain_candidates(origins, rays, r, seg[s1], seg[s2], J[mid], J[end], left,
                                          config.length_std_m, lat_std, offsets=offs)
         u = cands[:, :, 0] - r[:, None]  # root -> mid
@@ -539,8 +538,7 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
         # limbs swing in the sagittal plane through their root: the mirror solution of a
         # ray-sphere pair lies across the body (the camera looks roughly along the plane normal)
         lateral = np.sum((cands - r[:, None, None, :]) * left[:, None, None, :], -1)  # (F, 4, 2)
-        if arm:  # the wrist from the elbow; the midline is to the right of a left arm
-            medial = -1.0 if name.endswith("_l") else 1.0
+        if arm:  # the wrist from the elbow
             lateral = np.stack([lateral[..., 0],
                                 lateral[..., 1] - lateral[..., 0] - medial * config.forearm_medial_offset_m], -1)
         else:

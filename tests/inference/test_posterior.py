@@ -424,7 +424,7 @@ def test_planted_feet_slide_at_wrong_camera_heights(tmp_path):
     others at 2.2 and 5.8 %."""
     from probreg.sim import config_from_preset, synthesize, write_clip
 
-    crossings, peaks = [], []
+    crossings, peaks, above = [], [], []  # above: the slide 15 % above the true height
     for seed in (5, 6, 7):
         clip = synthesize(config_from_preset("run", seed, n_frames=150), seed=seed, preset="run")
         write_clip(clip, tmp_path / f"c{seed}", images=True, jobs=1)
@@ -438,8 +438,10 @@ def test_planted_feet_slide_at_wrong_camera_heights(tmp_path):
         assert np.all(np.diff(slide) < 0)  # the slide falls steadily with height here
         crossings.append(np.interp(0.0, -slide, lg[ok]))
         assert np.interp(np.log(0.85), lg[ok], slide) > 0.2
+        above.append(np.interp(np.log(1.15), lg[ok], slide))
         peaks.append(lg[np.argmax(model.ll_still)])
     crossings, peaks = np.abs(crossings), np.abs(peaks)
+    assert np.all(np.array(above) < 0) and np.median(above) < -0.2  # one clip, crossing at +14.6 %: -0.01
     assert np.all(crossings < np.log(1.2)) and np.median(crossings) < np.log(1.1)
     assert np.all(peaks < np.log(1.2)) and np.median(peaks) < np.log(1.1)
 
