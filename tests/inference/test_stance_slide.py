@@ -61,10 +61,25 @@ def test_frames_seen_along_the_track_are_not_read_and_too_few_give_nan():
 def test_sliding_feet_make_every_gait_number_unreliable_the_speed_included():
     g = {"cadence_spm": {"median": 180.0}, "contact_time_s": {"median": 0.15}, "speed_mps": {"median": 5.0},
          "step_length_m": {"median": 1.6}}
-    out, status, reasons = gait_check(g, 33.3, FPS, slide=stance_slide(SIDE_CAMERA, _runner(2.5), FPS))
+    # on a rail at half the speed the ground track moves as the pelvis does in the frame, at 2.5 m/s
+    rail = {**g, "speed_mps": {"median": 2.5}, "step_length_m": {"median": 0.8}}
+    out, status, reasons = gait_check(rail, 33.3, FPS, slide=stance_slide(SIDE_CAMERA, _runner(2.5), FPS))
     assert status == "unreliable" and len(reasons) == 1
     assert reasons[0].startswith("feet slide back (stance ankles at -1.0")
     assert {v["status"] for v in out.values()} == {"unreliable"}
     out, status, reasons = gait_check(g, 33.3, FPS, slide=stance_slide(SIDE_CAMERA, _runner(0.0), FPS))
     assert status == "ok" and not reasons and out["speed_mps"]["status"] == "ok"
     assert gait_check(g, 33.3, FPS, slide={"backslide": float("nan")})[1] == "ok"  # not measured: no verdict
+
+
+def test_a_ground_track_faster_than_the_pelvis_makes_the_speed_unreliable():
+    """The feet move as far as the pelvis over whole strides: a ground track at 3.5 times the
+    pelvis's speed (a grazing view's cast feet) is not the athlete's; within 1.25x it is."""
+    g = {"cadence_spm": {"median": 180.0}, "contact_time_s": {"median": 0.15}, "speed_mps": {"median": 17.5}}
+    slide = stance_slide(SIDE_CAMERA, _runner(0.0), FPS)
+    assert slide["speed_mps"] == pytest.approx(5.0, rel=0.02) and slide["backslide"] > -0.1
+    out, status, reasons = gait_check(g, 33.3, FPS, slide=slide)
+    assert status == "unreliable" and reasons == ["speed 17.5 m/s from the ground track, 5.0 m/s from the pelvis"]
+    assert out["speed_mps"]["status"] == out["cadence_spm"]["status"] == "unreliable"
+    for speed, want in ((3.9, "unreliable"), (4.1, "ok"), (6.2, "ok"), (6.3, "unreliable")):
+        assert gait_check({**g, "speed_mps": {"median": speed}}, 33.3, FPS, slide=slide)[1] == want, speed
