@@ -436,7 +436,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                      "slow_motion": options.slow_motion}
         if time_base["reason"]:  # every time-based gait number is off by the factor
             gait_status, gait_reasons = "unreliable", [*gait_reasons, time_base["reason"]]
-        cycles = gait_cycle_bands(pa, pn, model.contacts, inflation=options.band_inflation, noise_ratio=ratio)
+        cycles = gait_cycle_bands(pa, pn, model.contacts, inflation=options.band_inflation, noise_ratio=ratio,
+                                  fps=clip.fps)
     timings = {"total_s": time.perf_counter() - t0, "lanes_s": t1 - t0, **model.timings}
     out_dir = Path(out_dir)
     n_angle = int(np.sum(np.any(np.isfinite(np.array([v[0] for v in summ.values()])), axis=0)))

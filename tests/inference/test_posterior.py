@@ -392,6 +392,31 @@ def test_noise_ratio_scales_the_bootstrap_part_of_the_band():
     assert r == {"knee_l": pytest.approx(2.0)}
 
 
+def test_bands_below_the_reference_frame_rate_widen_by_the_rate_factor():
+    """Known answers: the same bootstrap draws on a straight angle curve at 25 fps give a band
+    (25/50 fps) ** -BAND_RATE_POWER = 1.248 times the 50 fps band; 60 fps keeps the 50 fps band;
+    ``inflation`` ignores the rate; the gait-cycle bands carry the same factor."""
+    from probreg.inference import BAND_SCALE, angle_bands, gait_cycle_bands
+    from probreg.inference.bands import BAND_RATE_POWER, frame_rate_factor
+
+    assert frame_rate_factor(25.0) == pytest.approx(2.0 ** BAND_RATE_POWER) == pytest.approx(1.248, abs=1e-3)
+    F = 100
+    line = 30.0 + 0.2 * np.arange(F)  # straight per frame at any rate: no curvature term
+    offsets = np.linspace(-1.0, 1.0, 101)[:, None]  # 5th/95th percentile -0.9/+0.9
+    point, noisy = {"knee_l": np.tile(line, (5, 1))}, {"knee_l": line + offsets}
+    half = {fps: angle_bands(point, noisy, fps=fps)["knee_l"][2] - line for fps in (25.0, 50.0, 60.0)}
+    assert np.allclose(half[50.0], BAND_SCALE["knee"] * 0.9) and np.allclose(half[60.0], half[50.0])
+    assert np.allclose(half[25.0], 1.248 * half[50.0], rtol=1e-3)
+    assert np.allclose(angle_bands(point, noisy, fps=25.0, inflation=1.0)["knee_l"][2] - line, 0.9)
+    contacts = np.zeros((F, 2), bool)
+    for a in range(5, F, 30):
+        contacts[a:a + 10, 0] = True
+        contacts[a + 15:a + 25, 1] = True
+    cyc = {fps: gait_cycle_bands(point, noisy, contacts, fps=fps)[("knee", "L")] for fps in (25.0, 50.0)}
+    w = {fps: np.nanmean(c[3] - c[1]) for fps, c in cyc.items()}
+    assert w[50.0] > 0 and w[25.0] == pytest.approx(1.248 * w[50.0], rel=1e-3)
+
+
 def test_gait_intervals_carry_the_step_timing_uncertainty(model):
     """Contacts are fixed for the point liftings (every camera hypothesis scored on the same
     steps), so their step timing is the same in every draw; the bootstrap liftings detect the
