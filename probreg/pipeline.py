@@ -432,7 +432,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         gait_s, gait_status, gait_reasons = gait_check(gait_s, stride, clip.fps, slide=slide, scatter=spread,
                                                        off_heading=off)
         time_base = {**time_base_check(model.kp, clip.fps, joints_med[:, JOINT_INDEX["pelvis"], 2], stride,
-                                       gait_s.get("speed_mps", {}).get("median"), model.raw),
+                                       gait_s.get("speed_mps", {}).get("median"), model.raw,
+                                       pelvis_speed_mps=slide.get("speed_mps")),
                      "slow_motion": options.slow_motion}
         if time_base["reason"]:  # every time-based gait number is off by the factor
             gait_status, gait_reasons = "unreliable", [*gait_reasons, time_base["reason"]]

@@ -28,7 +28,8 @@ The verdict reason (:func:`probreg.inference.verdict.clip_verdict`):
     it at more than :data:`FAST_CADENCE_SPM` steps/min) (factor from the
     bounce: ``sqrt(BOUNCE_REF_G / bounce)``), or the cadence is outside a runner's (factor
     from the cadence against :data:`CADENCE_REF_SPM`), or, when no stride repeats in the clip
-    (a replay shorter than 1.5 strides of real time), the speed is below a runner's (no factor).  Give the replay's
+    (a replay shorter than 1.5 strides of real time), the speed is below a runner's (no factor;
+    the slower of the ground track's and the pelvis's).  Give the replay's
     slow-down, ``probreg run --slow-motion N`` (config ``[clip] slow_motion``, manifest column
     ``slow_motion``): the clip's frame rate times ``N`` is then its rate in real time.
 
@@ -208,7 +209,8 @@ def repeated_frames(keypoints_px):
     return int(np.sum(med < REPEAT_MAX_SHIFT_PX)), int(pairs.sum())
 
 
-def time_base_check(keypoints_px, fps, pelvis_z_m=None, stride_frames=None, speed_mps=None, raw_keypoints_px=None):
+def time_base_check(keypoints_px, fps, pelvis_z_m=None, stride_frames=None, speed_mps=None, raw_keypoints_px=None,
+                    pelvis_speed_mps=None):
     """Does the clip run in real time?  A dict for ``run.json`` ``"time_base"``: ``fps`` (the rate
     the run used), ``stride_frames``, ``cadence_spm``, ``bounce_g`` (:func:`pelvis_bounce_g`),
     ``bounce_amplitude_m``, ``speed_mps``, ``status`` (``"ok"``, ``"slow"``, ``"fast"``;
@@ -216,7 +218,11 @@ def time_base_check(keypoints_px, fps, pelvis_z_m=None, stride_frames=None, spee
     replay, 0.5 for a clip running twice too fast; None when not known), ``reason`` (the verdict
     reason, None when ok), and ``repeated_frames``, ``frame_pairs`` and ``repeats_reason``
     (:func:`repeated_frames` of ``raw_keypoints_px``, the detector's own keypoints, default
-    ``keypoints_px``).  See the module docstring.
+    ``keypoints_px``).  ``speed_mps`` is the ground track's speed, ``pelvis_speed_mps`` the
+    pelvis's mean speed (:func:`probreg.inference.gait_check.stance_slide`; ``pelvis_speed_mps``
+    in the dict): when no stride repeats, the slower of the two decides, since either can be
+    broken (a grazing view's cast feet ran at 4.4 m/s in a 6x replay whose pelvis moved at 0.2).
+    See the module docstring.
 
     >>> t = np.arange(250)
     >>> z = 0.95 + 0.04 * np.cos(2 * np.pi * t / 70.0)  # a 4x replay at 50 fps: steps of 1.4 s
@@ -225,6 +231,9 @@ def time_base_check(keypoints_px, fps, pelvis_z_m=None, stride_frames=None, spee
     ('slow', 3.9, 'slow motion about 3.9x (pelvis bounce 0.08 g, cadence 43 steps/min, speed 1.1 m/s at 50 fps)')
     >>> time_base_check(None, 200.0, z, stride_frames=140.0, speed_mps=4.4)["status"]
     'ok'
+    >>> tb = time_base_check(None, 50.0, None, speed_mps=4.4, pelvis_speed_mps=0.2)  # no stride: the slower
+    >>> tb["status"], tb["reason"]
+    ('slow', 'slow motion (no stride repeats, speed 4.4 m/s, pelvis 0.2 m/s at 50 fps)')
     >>> flat = 0.95 + 0.005 * np.cos(2 * np.pi * t / 17.5)  # 0.16 g, but 171 steps/min: real cadence 470?
     >>> tb = time_base_check(None, 50.0, flat, stride_frames=35.0)
     >>> tb["status"], tb["bounce_g"]
@@ -244,9 +253,12 @@ def time_base_check(keypoints_px, fps, pelvis_z_m=None, stride_frames=None, spee
     # a swing far below a runner's
     bounce = _in_g(amp, sf / 2, fps) if MIN_BOUNCE_AMPLITUDE_M <= amp <= MAX_BOUNCE_AMPLITUDE_M else float("nan")
     speed = float("nan") if speed_mps is None else float(speed_mps)
+    pelvis_speed = float("nan") if pelvis_speed_mps is None else float(pelvis_speed_mps)
     lo, hi = RUNNING_CADENCE_SPM
-    # the speed (the ground track, often poor where the pelvis is) only when no stride repeats
-    slow = (bounce < MIN_BOUNCE_G) or (cadence < lo) or (np.isnan(cadence) and speed < MIN_RUNNING_SPEED_MPS)
+    # the speeds (the ground track's, often poor where the pelvis is; the pelvis's) only when no
+    # stride repeats: the slower of them
+    slower = np.nanmin([speed, pelvis_speed]) if np.isfinite([speed, pelvis_speed]).any() else float("nan")
+    slow = (bounce < MIN_BOUNCE_G) or (cadence < lo) or (np.isnan(cadence) and slower < MIN_RUNNING_SPEED_MPS)
     # or both moderately beyond a runner's: a 2x too fast jogger (4.6-5.5 g at 300-350 steps/min in
     # the mocap); a real sprinter's 240+ steps/min bounce at 1.5-2 g
     fast = (bounce > MAX_BOUNCE_G) or (cadence > hi) or (bounce > MAX_BOUNCE_G / 2 and cadence > FAST_CADENCE_SPM)
@@ -262,7 +274,8 @@ def time_base_check(keypoints_px, fps, pelvis_z_m=None, stride_frames=None, spee
         size = factor if status == "slow" else 1.0 / factor if status == "fast" else float("nan")
         parts = [f"pelvis bounce {bounce:.2f} g" if np.isfinite(bounce) else "",
                  f"cadence {cadence:.0f} steps/min" if np.isfinite(cadence) else "no stride repeats",
-                 f"speed {speed:.1f} m/s" if np.isfinite(speed) else ""]
+                 f"speed {speed:.1f} m/s" if np.isfinite(speed) else "",
+                 f"pelvis {pelvis_speed:.1f} m/s" if np.isfinite(pelvis_speed) else ""]
         reason = (("time base unclear" if status == "unclear" else f"{status} motion")
                   + (f" about {size:.1f}x" if np.isfinite(size) else "")
                   + f" ({', '.join(p for p in parts if p)} at {fps:g} fps)")
@@ -274,5 +287,6 @@ def time_base_check(keypoints_px, fps, pelvis_z_m=None, stride_frames=None, spee
     nan_none = lambda v: float(v) if np.isfinite(v) else None  # noqa: E731
     return {"fps": fps, "stride_frames": nan_none(sf), "bounce_amplitude_m": nan_none(amp),
             "cadence_spm": nan_none(cadence), "bounce_g": nan_none(bounce),
-            "speed_mps": nan_none(speed), "status": status, "factor": nan_none(factor), "reason": reason,
+            "speed_mps": nan_none(speed), "pelvis_speed_mps": nan_none(pelvis_speed), "status": status,
+            "factor": nan_none(factor), "reason": reason,
             "repeated_frames": repeats, "frame_pairs": pairs, "repeats_reason": repeats_reason}

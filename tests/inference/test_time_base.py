@@ -79,6 +79,19 @@ def test_cadence_alone_and_speed_alone_decide_when_the_bounce_is_unknown():
     assert time_base_check(None, 50.0, None, stride_frames=None, speed_mps=4.0)["status"] == "ok"
 
 
+def test_with_no_stride_the_slower_of_the_two_speeds_decides():
+    """Either speed can be broken (a grazing 6x replay: cast feet at 4.4 m/s, pelvis at 0.2; a
+    pelvis at 47 m/s where the feet said 1.2); a stride that repeats leaves both unused."""
+    def status(track, pelvis, stride=None):
+        return time_base_check(None, 50.0, None, stride_frames=stride, speed_mps=track, pelvis_speed_mps=pelvis)["status"]
+
+    assert status(4.4, 0.2) == status(1.2, 47.0) == status(1.4, None) == status(None, 1.4) == "slow"
+    assert status(4.4, 4.0) == status(None, None) == "ok"
+    assert status(4.4, 0.2, stride=35.0) == "ok"  # 171 steps/min: the stride rules
+    tb = time_base_check(None, 50.0, None, speed_mps=4.4, pelvis_speed_mps=0.2)
+    assert tb["speed_mps"] == 4.4 and tb["pelvis_speed_mps"] == 0.2 and "pelvis 0.2 m/s" in tb["reason"]
+
+
 def test_a_bounce_far_below_a_runners_amplitude_says_nothing_about_time():
     # a pelvis the lifting flattened to 1 mm (0.03 g) at 400 steps/min: the cadence alone says fast
     z = _bounce(250, 17.5, amp_m=0.001)
