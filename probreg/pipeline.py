@@ -153,11 +153,9 @@ def posterior_inference_data(sampler, burn=0, keypoints_px=None, frame_lanes=Non
                                            else np.full(3, np.nan) for fl in frame_lanes])
         obs["n_lane_lines"] = np.array([len(fl.lines) for fl in frame_lanes])
     if obs:
-        od = az.from_dict(observed_data=obs,
-                          dims={"keypoints_px": ["frame", "joint", "coord"],
-                                "vanishing_point": ["frame", "homogeneous"], "n_lane_lines": ["frame"]},
-                          coords={"joint": list(JOINT_NAMES), "coord": ["x", "y", "score"],
-                                  "homogeneous": ["x", "y", "w"]})
+        dims = {"keypoints_px": ["frame", "joint", "coord"], "vanishing_point": ["frame", "homogeneous"]}
+        od = az.from_dict(observed_data=obs, dims={**dims, "n_lane_lines": ["frame"]},
+                          coords={"joint": list(JOINT_NAMES), "coord": ["x", "y", "score"], "homogeneous": list("xyw")})
         idata.extend(od)
     return idata
 
@@ -432,8 +430,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         gait_s, gait_status, gait_reasons = gait_check(gait_s, stride, clip.fps, slide=slide, scatter=spread,
                                                        off_heading=off)
         time_base = {**time_base_check(model.kp, clip.fps, joints_med[:, JOINT_INDEX["pelvis"], 2], stride,
-                                       gait_s.get("speed_mps", {}).get("median"), model.raw,
-                                       pelvis_speed_mps=slide.get("speed_mps")),
+                                       gait_s.get("speed_mps", {}).get("median"), model.raw, slide.get("speed_mps")),
                      "slow_motion": options.slow_motion}
         if time_base["reason"]:  # every time-based gait number is off by the factor
             gait_status, gait_reasons = "unreliable", [*gait_reasons, time_base["reason"]]
