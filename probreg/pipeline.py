@@ -153,8 +153,9 @@ def posterior_inference_data(sampler, burn=0, keypoints_px=None, frame_lanes=Non
                                            else np.full(3, np.nan) for fl in frame_lanes])
         obs["n_lane_lines"] = np.array([len(fl.lines) for fl in frame_lanes])
     if obs:
-        dims = {"keypoints_px": ["frame", "joint", "coord"], "vanishing_point": ["frame", "homogeneous"]}
-        od = az.from_dict(observed_data=obs, dims={**dims, "n_lane_lines": ["frame"]},
+        dims = {"keypoints_px": ["frame", "joint", "coord"], "vanishing_point": ["frame", "homogeneous"],
+                "n_lane_lines": ["frame"]}
+        od = az.from_dict(observed_data=obs, dims=dims,
                           coords={"joint": list(JOINT_NAMES), "coord": ["x", "y", "score"], "homogeneous": list("xyw")})
         idata.extend(od)
     return idata

@@ -330,8 +330,7 @@ def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE, slide=None
     if off_track:
         reasons.append(f"ground track off the running direction in {100 * off_heading:.0f} % of frames")
     speed, pelvis = _median(gait, "speed_mps"), float("nan") if not slide else float(slide.get("speed_mps", np.nan))
-    with np.errstate(divide="ignore", invalid="ignore"):
-        disagree = bool(speed > 0 and pelvis > 0 and abs(np.log(speed / pelvis)) > np.log(MAX_SPEED_RATIO))
+    disagree = bool(speed > 0 and pelvis > 0 and abs(np.log(speed / pelvis)) > np.log(MAX_SPEED_RATIO))
     if disagree:
         reasons.append(f"speed {speed:.1f} m/s from the ground track, {pelvis:.1f} m/s from the pelvis")
     status = "unreliable" if reasons else "ok"

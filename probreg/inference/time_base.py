@@ -257,11 +257,13 @@ def time_base_check(keypoints_px, fps, pelvis_z_m=None, stride_frames=None, spee
     lo, hi = RUNNING_CADENCE_SPM
     # the speeds (the ground track's, often poor where the pelvis is; the pelvis's) only when no
     # stride repeats: the slower of them
-    slower = np.nanmin([speed, pelvis_speed]) if np.isfinite([speed, pelvis_speed]).any() else float("nan")
+    slower = float(np.fmin(speed, pelvis_speed))  # NaN only when both are
     slow = (bounce < MIN_BOUNCE_G) or (cadence < lo) or (np.isnan(cadence) and slower < MIN_RUNNING_SPEED_MPS)
     # or both moderately beyond a runner's: a 2x too fast jogger (4.6-5.5 g at 300-350 steps/min in
     # the mocap); a real sprinter's 240+ steps/min bounce at 1.5-2 g
     fast = (bounce > MAX_BOUNCE_G) or (cadence > hi) or (bounce > MAX_BOUNCE_G / 2 and cadence > FAST_CADENCE_SPM)
+    # within the amplitude bounds the bounce and the cadence cannot point both ways at the present
+    # thresholds; "unclear" stays so that changed thresholds cannot make such a clip silently "slow"
     status = "unclear" if slow and fast else "slow" if slow else "fast" if fast else "ok"
     if np.isfinite(bounce) and bounce > 0:
         factor = float(np.sqrt(BOUNCE_REF_G / bounce))
