@@ -48,6 +48,7 @@ from .inference.evidence import BRANCHES, BranchChoice, laplace_log_evidence
 from .inference.verdict import bone_length_cv, clip_verdict, knee_band_width, knee_flexion_peak, view_obliquity
 from .inference.parallel import default_workers, fork_call, warm_imports
 from .inference.time_base import time_base_check
+from .inference.gait_check import with_time_base
 from .io.clip import (FPS_RANGE, MIN_ATHLETE_FRAMES, MIN_ATHLETE_JOINTS, ClipFormatError, athlete_frames, load_clip,
                       with_slow_motion, write_json)
 from .io.frames import has_frames
@@ -429,12 +430,11 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         diag["speed_scatter"] = spread = speed_scatter(joints_med, clip.fps, stride := model.stride_frames())
         diag["track_off_heading"] = off = model.track_off_heading(height["median"])  # a track run backwards?
         gait_s, gait_status, gait_reasons = gait_check(gait_s, stride, clip.fps, slide=slide, scatter=spread,
-                                                       off_heading=off)
+                                                       off_heading=off, lags=model.pattern_lags())
         time_base = {**time_base_check(model.kp, clip.fps, joints_med[:, JOINT_INDEX["pelvis"], 2], stride,
                                        gait_s.get("speed_mps", {}).get("median"), model.raw, slide.get("speed_mps")),
                      "slow_motion": options.slow_motion}
-        if time_base["reason"]:  # every time-based gait number is off by the factor
-            gait_status, gait_reasons = "unreliable", [*gait_reasons, time_base["reason"]]
+        gait_s, gait_status, gait_reasons = with_time_base(gait_s, gait_status, gait_reasons, time_base)  # rates off?
         cycles = gait_cycle_bands(pa, pn, model.contacts, inflation=options.band_inflation, noise_ratio=ratio,
                                   fps=clip.fps)
     timings = {"total_s": time.perf_counter() - t0, "lanes_s": t1 - t0, **model.timings}

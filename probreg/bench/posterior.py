@@ -115,7 +115,8 @@ def score_result(clip_dir, out_dir):
             continue
         gait_scores[name] = {"median": g["median"], "lo": g["lo"], "hi": g["hi"], "truth": t,
                              "error": g["median"] - t, "rel_pct": 100 * (g["median"] - t) / abs(t) if t else np.nan,
-                             "inside": bool(g["lo"] <= t <= g["hi"]), "width": g["hi"] - g["lo"]}
+                             "inside": bool(g["lo"] <= t <= g["hi"]), "width": g["hi"] - g["lo"],
+                             "source": g.get("source")}
     return {
         "gait": gait_scores,
         "knee_deg": float(np.mean(knee_err)), "mpjpe_cm": mpjpe,

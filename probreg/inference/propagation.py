@@ -9,7 +9,7 @@ from dataclasses import replace
 import numpy as np
 
 from ..analysis import gait_summary
-from ..filtering import clean_keypoints, score_noise_scale
+from ..filtering import clean_keypoints, score_noise_scale, stride_lags
 from ..geometry import ANGLE_NAMES, JOINT_INDEX, CameraArrays
 from ..lifting import LiftConfig, fit_ground_track, lift
 from ..lifting.trajectory import camera_track_config
@@ -163,8 +163,16 @@ class DrawPropagation:
         if getattr(self, "_stride_frames", None) is None:
             from .gait_check import pattern_stride_frames
 
-            self._stride_frames = pattern_stride_frames(self.kp, self.fps, self.stride_lag)
+            self._stride_frames = pattern_stride_frames(self.kp, self.fps, self.pattern_lags())
         return self._stride_frames
+
+    def pattern_lags(self):
+        """The per-frame stride lags (frames) of the 2-D pattern (:func:`probreg.filtering.stride_lags`;
+        the cross-stride smoothing's when it ran), or None without repeating strides: the stride period's
+        and the published cadence's (:func:`probreg.inference.gait_check.pattern_cadence_interval`)."""
+        if not hasattr(self, "_pattern_lags"):
+            self._pattern_lags = self.stride_lag if self.stride_lag is not None else stride_lags(self.kp, self.fps)
+        return self._pattern_lags
 
     def track_off_heading(self, height_m):
         """The share of the frames with a camera whose ground track (the point lifting's: the

@@ -354,14 +354,16 @@ def run_report(out_html, clip, result, joints_median, cameras, rendered=None):
     rep.heading("Gait")
     gait_reasons = getattr(result, "gait_verdict_reasons", ())
     if any(r.startswith("feet slide back") for r in gait_reasons):  # the along-track positions do not hold
-        rep.paragraph("Every gait number, the speed included, is unreliable: " + "; ".join(gait_reasons)
+        rep.paragraph("Every gait number from the ground track or the contacts, the speed included, is unreliable: "
+                      + "; ".join(gait_reasons)
                       + ". Planted feet stand still, and here they run backwards: the camera moved along the "
                       "track (a rail or tracking camera; probreg assumes a static one), or the positions along "
                       "the track do not hold together from frame to frame (probreg.inference.gait_check). Their "
                       "bands do not cover this; the angles do not rest on the positions along the track.",
                       cls="warning")
     elif any(r.startswith("ground track off") for r in gait_reasons):  # the track's velocity is not the athlete's
-        rep.paragraph("Every gait number, the speed included, is unreliable: " + "; ".join(gait_reasons)
+        rep.paragraph("Every gait number from the ground track or the contacts, the speed included, is unreliable: "
+                      + "; ".join(gait_reasons)
                       + ". The ground track from the feet in contact heads away from the straight's running "
                       "direction: its contacts were too few or too noisy to give the athlete's velocity (in a low "
                       "grazing view a pixel moves a foot cast onto the ground by metres along its ray). The angles "
@@ -371,8 +373,12 @@ def run_report(out_html, clip, result, joints_median, cameras, rendered=None):
                       + "; ".join(gait_reasons) + " (probreg.inference.gait_check). Their bands do not "
                       "cover this; the angles do not rest on the contacts' timing.", cls="warning")
     rep.table(["quantity", "median", "5 %", "95 %", "unit", "status"],
-              [[k, v["median"], v["lo"], v["hi"], GAIT_FIELDS.get(k, ""), v.get("status", "")]
+              [[k, v["median"], v["lo"], v["hi"], v.get("unit") or GAIT_FIELDS.get(k, ""), v.get("status", "")]
                for k, v in result.gait.items()])
+    if (result.gait.get("cadence_spm") or {}).get("source") == "stride pattern":
+        rep.paragraph("The cadence is the 2-D stride pattern's (no camera, no contacts; its interval from the "
+                      "strides' scatter); cadence_contacts_spm is the contacts' own, which the gait check compares.",
+                      cls="note")
     spread = (getattr(result, "diagnostics", None) or {}).get("speed_scatter") or {}
     if np.isfinite(spread.get("se_mps", np.nan)) and spread["se_mps"] > 0:
         rep.paragraph(f"The speed's interval includes the camera pan's error: the runner's speed over one stride "

@@ -66,7 +66,9 @@ def test_sliding_feet_make_every_gait_number_unreliable_the_speed_included():
     out, status, reasons = gait_check(rail, 33.3, FPS, slide=stance_slide(SIDE_CAMERA, _runner(2.5), FPS))
     assert status == "unreliable" and len(reasons) == 1
     assert reasons[0].startswith("feet slide back (stance ankles at -1.0")
-    assert {v["status"] for v in out.values()} == {"unreliable"}
+    # every number but the stride pattern's cadence, which needs neither the camera nor a contact
+    assert {k for k, v in out.items() if v["status"] != "unreliable"} == {"cadence_spm"}
+    assert out["cadence_spm"]["source"] == "stride pattern" and out["cadence_contacts_spm"]["status"] == "unreliable"
     out, status, reasons = gait_check(g, 33.3, FPS, slide=stance_slide(SIDE_CAMERA, _runner(0.0), FPS))
     assert status == "ok" and not reasons and out["speed_mps"]["status"] == "ok"
     assert gait_check(g, 33.3, FPS, slide={"backslide": float("nan")})[1] == "ok"  # not measured: no verdict
@@ -80,6 +82,6 @@ def test_a_ground_track_faster_than_the_pelvis_makes_the_speed_unreliable():
     assert slide["speed_mps"] == pytest.approx(5.0, rel=0.02) and slide["backslide"] > -0.1
     out, status, reasons = gait_check(g, 33.3, FPS, slide=slide)
     assert status == "unreliable" and reasons == ["speed 17.5 m/s from the ground track, 5.0 m/s from the pelvis"]
-    assert out["speed_mps"]["status"] == out["cadence_spm"]["status"] == "unreliable"
+    assert out["speed_mps"]["status"] == out["cadence_contacts_spm"]["status"] == "unreliable"
     for speed, want in ((3.9, "unreliable"), (4.1, "ok"), (6.2, "ok"), (6.3, "unreliable")):
         assert gait_check({**g, "speed_mps": {"median": speed}}, 33.3, FPS, slide=slide)[1] == want, speed

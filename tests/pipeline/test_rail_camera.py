@@ -41,7 +41,13 @@ def test_a_rail_camera_is_found_by_its_sliding_feet(runs):
     assert run["gait_verdict"] == "unreliable"
     assert any(r.startswith("feet slide back") for r in run["gait_verdict_reasons"])
     assert gait["speed_mps"]["status"] == "unreliable" and gait["step_length_m"]["status"] == "unreliable"
-    assert "Every gait number, the speed included, is unreliable" in runs["reports"]["rail"]
+    assert "Every gait number from the ground track or the contacts, the speed included, is unreliable" \
+        in runs["reports"]["rail"]
+    # the cadence of the 2-D stride pattern needs no camera: a moving one leaves it right and ok
+    clip = runs["rail"][4]
+    step_hz = json.loads((clip / "groundtruth" / "athlete.json").read_text())["gait"]["step_freq_hz"]
+    assert gait["cadence_spm"]["source"] == "stride pattern" and gait["cadence_spm"]["status"] == "ok"
+    assert gait["cadence_spm"]["median"] == pytest.approx(60 * step_hz, rel=0.03)
     assert "the camera moved along the track" in runs["reports"]["rail"]
 
 

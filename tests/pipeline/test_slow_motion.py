@@ -51,6 +51,11 @@ def test_a_replay_run_as_labelled_is_flagged_with_its_slow_down(replay, as_label
     assert tb["cadence_spm"] == pytest.approx(cadence_true / 2, rel=0.05)
     assert any(r.startswith("slow motion about") for r in run["verdict_reasons"])
     assert run["gait_verdict"] == "unreliable" and tb["reason"] in run["gait_verdict_reasons"]
+    # the published cadence is the stride pattern's, half the runner's at the played rate, and the
+    # time base marks it (and every other rate, time and speed) unreliable; a step length is not a rate
+    assert gait["cadence_spm"]["source"] == "stride pattern"
+    assert gait["cadence_spm"]["median"] == pytest.approx(cadence_true / 2, rel=0.05)
+    assert gait["cadence_spm"]["status"] == gait["speed_mps"]["status"] == "unreliable"
     report = (out / "report.html").read_text()
     assert "Time base: 50 fps taken as real time" in report and "--slow-motion N" in report
 
@@ -69,6 +74,8 @@ def test_given_its_slow_down_the_replay_runs_in_real_time(replay, tmp_path):
         rows = [(int(r["frame"]), float(r["time_s"])) for r in csv.DictReader(fh)]
     assert all(t == pytest.approx(f / CAPTURE_FPS, abs=1e-4) for f, t in rows)  # the files' time is real time
     assert "slow motion" not in json.dumps(gait)
+    assert gait["cadence_spm"]["median"] == pytest.approx(cadence_true, rel=0.03)  # the stride pattern's
+    assert gait["cadence_spm"]["status"] == "ok" and gait["cadence_spm"]["source"] == "stride pattern"
 
 
 def test_the_replay_benchmark_scores_a_result_against_the_truth(replay, as_labelled):
