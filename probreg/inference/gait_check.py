@@ -1,10 +1,12 @@
 """Can the gait numbers be used? A check of the ones that rest on the detected ground contacts.
 
-``gait.json``'s cadence, step length, contact and flight time and the knee angles at touchdown
-and in swing all come from the contacts the lifting finds (the ankles' along-track speed,
-:func:`probreg.lifting.trajectory.detect_contacts`). Where the cast ankles are noisy (a grazing
-or steep view, a detector's ankles) contacts flicker, merge or go missing, and those numbers
-come out wrong with intervals that do not say so: on the tuning clips of the held-out
+``gait.json``'s step length, contact and flight time, the knee angles at touchdown and in swing,
+and the contacts' cadence (``cadence_contacts_spm``; the cadence published is the 2-D stride
+pattern's, :func:`pattern_cadence_interval`, where the clip has one) come from the contacts the
+lifting finds (the ankles' along-track speed, :func:`probreg.lifting.trajectory.detect_contacts`).
+Where the cast ankles are noisy (a grazing or steep view, a detector's ankles) contacts flicker,
+merge or go missing, and those numbers come out wrong with intervals that do not say so: on the
+tuning clips of the held-out
 generator (seeds 7501-7540, not the held-out set; 0.2.0.dev12's step time) the contacts'
 cadence was 6-97 % off on 8 of 39 clips, seven of them with the clip verdict ``ok`` (their
 angles were good).
