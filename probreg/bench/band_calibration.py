@@ -96,6 +96,7 @@ def run(args=None):
     rep.add(__doc__.split("\n\n", 1)[1])
     data = {fam: [] for fam in FAMILIES}  # family -> per clip (med, d_lo, d_hi, truth, curvature)
     gait_z = []  # per clip and gait number: |error| / half-interval on the truth's side
+    pattern = []  # per clip: does the stride pattern's cadence interval hold the truth
     names, accuracy = [], []
     with tempfile.TemporaryDirectory() as tmp:
         for preset, seed in HELD_OUT:
@@ -114,6 +115,7 @@ def run(args=None):
             accuracy.append(score_result(clip_dir, Path(tmp) / "out"))
             for name, g in accuracy[-1]["gait"].items():
                 if g.get("source") == "stride pattern":  # its own interval (gait_check), not the scale's
+                    pattern.append(bool(g["lo"] <= g["truth"] <= g["hi"]))
                     continue
                 t = g["truth"]
                 half = g["hi"] - g["median"] if t >= g["median"] else g["median"] - g["lo"]
@@ -170,4 +172,8 @@ def run(args=None):
     rep.add(f"Over all {len(z)} clip-numbers the raw intervals hold {100 * np.mean(z <= 1):.1f} % of the truths; "
             f"the scale for 90 % is **{kg:.2f}** (in `GAIT_BAND_SCALE`: {GAIT_BAND_SCALE:.2f}).\n")
     rep.numbers["gait_scale"] = kg
+    if pattern:
+        rep.add(f"The stride pattern's cadence interval (not scaled) holds the truth on {sum(pattern)} of "
+                f"{len(pattern)} clips.\n")
+        rep.numbers["pattern_cadence_held"] = [int(sum(pattern)), len(pattern)]
     return rep
