@@ -179,14 +179,14 @@ def pattern_cadence_interval(stride_frames, fps, lags=None, z=None):
     if not np.isfinite(sf) or sf <= 0 or not np.isfinite(fps) or fps <= 0:
         return float("nan"), float("nan"), float("nan")
     lag = np.asarray([] if lags is None else lags, float).ravel()
-    lag = lag[np.isfinite(lag)]
+    lag = lag[np.isfinite(lag) & (lag > 0)]
     if len(lag):
         lag = lag * (sf / np.median(lag))  # a period halved by the pattern: its lags too
         se = float(np.hypot(np.std(lag) / np.sqrt(max(len(lag) / sf, 1.0)), PATTERN_LAG_RESOLUTION_FRAMES))
     else:
         se = PATTERN_LAG_RESOLUTION_FRAMES
-    hi = 120.0 * fps / (sf - z * se) if sf > z * se else float("inf")
-    return 120.0 * fps / sf, 120.0 * fps / (sf + z * se), hi
+    hi = pattern_cadence_spm(sf - z * se, fps) if sf > z * se else float("inf")
+    return pattern_cadence_spm(sf, fps), pattern_cadence_spm(sf + z * se, fps), hi
 
 
 def stance_slide(cameras, joints_track_m, fps):
@@ -397,10 +397,11 @@ def gait_check(gait, stride_frames, fps, tolerance=CADENCE_TOLERANCE, slide=None
         sp["hi"] = m + float(np.hypot(sp["hi"] - m, extra))
     pm, plo, phi = pattern_cadence_interval(stride_frames, fps, lags)
     if np.isfinite(pm):
-        contacts = out.pop("cadence_spm", {"status": status})
-        out["cadence_spm"] = {"median": pm, "lo": plo, "hi": phi, "unit": contacts.get("unit", "steps/min"),
+        contacts = out.pop("cadence_spm", None)
+        out["cadence_spm"] = {"median": pm, "lo": plo, "hi": phi, "unit": (contacts or {}).get("unit", "steps/min"),
                               "source": "stride pattern", "status": "ok"}
-        out["cadence_contacts_spm"] = {**contacts, "source": "contacts"}
+        if contacts is not None:  # a summary without the contacts' cadence gets none invented
+            out["cadence_contacts_spm"] = {**contacts, "source": "contacts"}
     return out, status, reasons
 
 
