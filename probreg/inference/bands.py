@@ -266,6 +266,9 @@ def angle_bands(angles_point, angles_noisy, fps=None, lo=5.0, hi=95.0, inflation
 #: generator (steep, wide, grazing, far; seeds 9501-9516); the raw intervals held 58.0 % of the truths.
 GAIT_BAND_SCALE = 3.33
 
+#: Each gait number's factor on :data:`GAIT_BAND_SCALE` (1 for a number not listed).
+GAIT_NUMBER_FACTORS = {}
+
 #: Name endings of the gait numbers that cannot be negative (their intervals stop at zero).
 NONNEGATIVE_GAIT_SUFFIXES = ("_spm", "_m", "_mps", "_s")
 
@@ -275,7 +278,7 @@ def gait_intervals(gait_point, gait_noisy, lo=5.0, hi=95.0, inflation=None):
     The median is that of the point liftings; each side of the interval is the bootstrap
     liftings' deviation from their own median (contacts detected anew on re-noised
     keypoints: step timing varies there and only there) scaled by ``inflation`` (default
-    :data:`GAIT_BAND_SCALE`).
+    :data:`GAIT_BAND_SCALE` times the number's :data:`GAIT_NUMBER_FACTORS`).
 
     Numbers that cannot be negative (rates, lengths, speeds, times: names ending in
     ``_spm``, ``_m``, ``_mps``, ``_s``) are cut at zero, the interval and the median: a widened
@@ -299,11 +302,11 @@ def gait_intervals(gait_point, gait_noisy, lo=5.0, hi=95.0, inflation=None):
     """
     import warnings
 
-    k = GAIT_BAND_SCALE if inflation is None else float(inflation)
     out = {}
     with warnings.catch_warnings():
         warnings.simplefilter("ignore", RuntimeWarning)
         for name, v in gait_point.items():
+            k = GAIT_BAND_SCALE * GAIT_NUMBER_FACTORS.get(name, 1.0) if inflation is None else float(inflation)
             med = float(np.nanmedian(v))
             w = np.asarray(gait_noisy.get(name, v), float)
             c = np.nanmedian(w)
