@@ -226,6 +226,7 @@ def run(args=None):
     rep.numbers["scale"] = {fam: k for fam, (k, _) in fitted.items()}
     z = np.array([v for _, v, _ in gait_z])
     kg, factors = fit_gait_scales(gait_z)
+    k_pooled = fit_gait_scales(gait_z, per_number=False)[0]
     rep.add("## Gait numbers\n")
     rep.add("Each gait number's interval (`gait.json`) is the bootstrap liftings' spread (contacts detected "
             "anew on re-noised keypoints) about the point liftings' median, scaled by `GAIT_BAND_SCALE` times "
@@ -237,13 +238,12 @@ def run(args=None):
     for n in dict.fromkeys(k for k, _, _ in gait_z):
         v = np.array([r for kk, r, _ in gait_z if kk == n])
         rows.append([n, len(v), float(np.median(v)), float(np.max(v)), f"{int(np.sum(v <= 1))} of {len(v)}",
-                     factors[n], f"{int(np.sum(v <= fit_gait_scales(gait_z, per_number=False)[0]))} of {len(v)}",
+                     factors[n], f"{int(np.sum(v <= k_pooled))} of {len(v)}",
                      f"{int(np.sum(v <= kg * factors[n]))} of {len(v)}",
                      f"{GAIT_NUMBER_FACTORS.get(n, 1.0):.2f}"])
     rep.add(md_table(["number", "clips", "median ratio", "largest ratio", "inside the raw interval",
                       "factor (median ratio over the pooled median)", "inside, one pooled scale",
                       "inside, scale x factor", "factor in use"], rows))
-    k_pooled = fit_gait_scales(gait_z, per_number=False)[0]
     rep.add(f"Over all {len(z)} clip-numbers the raw intervals hold {100 * np.mean(z <= 1):.1f} % of the truths; "
             f"one pooled scale for 90 % would be {k_pooled:.2f}; with the numbers' factors the common scale for "
             f"90 % is **{kg:.2f}** (in `GAIT_BAND_SCALE`: {GAIT_BAND_SCALE:.2f}).\n")
