@@ -16,7 +16,7 @@ the suite (``bench posterior``) then tests them out of sample.
 
 Two kinds of clips (0.2.0.dev28): eight of the suite's presets at seeds 901-908 (250 frames, a lens
 given where the clip has one), and sixteen set-ups of the broadened generator
-(:func:`probreg.sim.heldout.heldout_config` at its own seeds ``CALIBRATION_SEEDS`` 9501-9516, fixed
+(:func:`probreg.sim.heldout.write_heldout` at its own seeds ``CALIBRATION_SEEDS`` 9501-9516, fixed
 before their first run and apart from the held-out set's 9001-9040; 100 frames as the held-out
 clips, default options: lens inferred, side and branch by evidence), so that the scales meet the
 set-ups users meet, steep, wide, grazing and far ones included, whatever their verdict.  A clip
@@ -39,7 +39,7 @@ from ..io.clip import load_clip, load_groundtruth
 from ..io.results import read_angles_csv
 from ..pipeline import RunOptions, run_clip
 from ..sim import config_from_preset, synthesize, write_clip
-from ..sim.heldout import heldout_config
+from ..sim.heldout import write_heldout
 from .common import BenchReport, md_table
 from .posterior import score_result
 
@@ -146,11 +146,8 @@ def _clips(tmp):
         yield preset, seed, clip_dir, dist
         shutil.rmtree(clip_dir)
     for seed in CALIBRATION_SEEDS:
-        cfg, kind, far = heldout_config(seed, 100)
-        kind += "_far" if far else ""
-        clip_dir = tmp / f"{kind}_{seed}"
-        write_clip(synthesize(cfg, seed=seed, preset=f"calibration:{kind}"), clip_dir)
-        yield kind, seed, clip_dir, None
+        clip_dir = write_heldout(tmp, n_frames=100, seeds=(seed,), label="calibration")[0]
+        yield Path(clip_dir).name.split("_", 2)[2], seed, clip_dir, None  # kind[_far]
         shutil.rmtree(clip_dir)
 
 
@@ -167,7 +164,8 @@ def run(args=None):
             out = Path(tmp) / "out"
             run_clip(clip_dir, out, RunOptions(report=False, band_inflation=1.0, dist=dist),
                      log=lambda *a: None)
-            verdict = json.loads((out / "run.json").read_text()).get("verdict")
+            run_json = json.loads((out / "run.json").read_text())
+            verdict = run_json.get("verdict")
             if verdict == "uncalibrated":
                 skipped.append(f"{preset} ({seed})")
                 continue
@@ -186,7 +184,7 @@ def run(args=None):
                 err = abs(t - g["median"])
                 gait_z.append((name, err / half if half > 0 else (0.0 if err == 0 else np.inf), verdict == "ok"))
             # the raw bootstrap deviations times each angle's noise-ratio factor, as angle_bands has them
-            ratio = json.loads((out / "run.json").read_text()).get("band_noise_ratio", {})
+            ratio = run_json.get("band_noise_ratio", {})
             for fam, keys in FAMILIES.items():
                 parts = []
                 for k in keys:

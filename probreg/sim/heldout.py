@@ -75,13 +75,16 @@ def heldout_config(seed, n_frames=100):
     return cfg, kind, far
 
 
-def write_heldout(out_dir, n_frames=100, seeds=HELDOUT_SEEDS, jobs=None, overwrite=False):
-    """Write the held-out clips to ``out_dir/heldout_<seed>_<kind>[_far]``; returns their paths."""
+def write_heldout(out_dir, n_frames=100, seeds=HELDOUT_SEEDS, jobs=None, overwrite=False, label="heldout"):
+    """Write the held-out clips to ``out_dir/<label>_<seed>_<kind>[_far]``; returns their paths.
+
+    ``label`` names clips of the same generator drawn at other seeds (e.g. ``"calibration"`` for
+    ``probreg bench band-calibration``'s), in the folder's name and the clip's preset."""
     out_dir = Path(out_dir)
     paths = []
     for seed in seeds:
         cfg, kind, far = heldout_config(seed, n_frames)
-        name = f"heldout_{seed}_{kind}" + ("_far" if far else "")
-        clip = synthesize(replace(cfg), seed=int(seed), preset=f"heldout:{kind}")
+        name = f"{label}_{seed}_{kind}" + ("_far" if far else "")
+        clip = synthesize(replace(cfg), seed=int(seed), preset=f"{label}:{kind}")
         paths.append(write_clip(clip, out_dir / name, images=True, jobs=jobs, overwrite=overwrite))
     return paths
