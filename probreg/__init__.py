@@ -10,7 +10,7 @@ from .geometry import Camera
 from .geometry import ANGLE_NAMES, JOINT_NAMES, joint_angles
 from .geometry import STANDARD_TRACK, TrackGeometry
 
-__version__ = "0.2.0.dev28"
+__version__ = "0.2.0.dev29"
 
 __all__ = ["Camera", "TrackGeometry", "STANDARD_TRACK", "JOINT_NAMES", "ANGLE_NAMES",
            "joint_angles", "__version__"]

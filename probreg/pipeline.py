@@ -1,26 +1,23 @@
 """The whole pipeline for one clip: frames -> lanes -> family -> posterior -> angles -> result folder.
 
-Writes the result layout of ``CLIP_FORMAT.md``: ``angles.csv``, ``joints3d.npz``,
-``camera.json``, ``posterior.nc`` and ``report.html``; OpenSim's ``markers.trc`` and ``angles.mot``
-(:mod:`probreg.io.opensim`) and the gait-cycle curves ``gait_cycle.csv``
-(:func:`probreg.inference.gait_cycle_bands`) (plus ``gait.json`` and
-``run.json`` with diagnostics and per-frame statuses: ``ok``; ``bridged`` (no lanes in
-this frame, camera interpolated from its neighbours); ``bridged_inconsistent`` (lanes found
-but their family leaves the clip's zoom path, so it is treated like a frame without lanes);
-``bridged_no_member`` (lanes found, but their family has no member at the clip's camera
-height, e.g. a misdetected line; bridged likewise); ``inconsistent`` and ``no_member`` (the
-same two cases at the clip's start or end, where there is nothing to bridge from: no camera);
-``missing_image`` (the clip has no image file for this frame: no camera), ``bad_image`` (its image
-does not decode, or has another size) and ``bridged_missing_image``, ``bridged_bad_image`` (likewise,
-camera interpolated from its neighbours);
-otherwise the lane status of the frame, e.g. ``too_few_lines``, ``no_straight``).
+Writes the result layout of ``CLIP_FORMAT.md``: ``angles.csv``, ``joints3d.npz``, ``camera.json``,
+``posterior.nc`` and ``report.html``; OpenSim's ``markers.trc`` and ``angles.mot`` (:mod:`probreg.io.opensim`)
+and the gait-cycle curves ``gait_cycle.csv`` (:func:`probreg.inference.gait_cycle_bands`) (plus ``gait.json``
+and ``run.json`` with diagnostics and per-frame statuses: ``ok``; ``bridged`` (no lanes in this frame, camera
+interpolated from its neighbours); ``bridged_inconsistent`` (lanes found but their family leaves the clip's zoom
+path, so it is treated like a frame without lanes); ``bridged_no_member`` (lanes found, but their family has no
+member at the clip's camera height, e.g. a misdetected line; bridged likewise); ``inconsistent`` and
+``no_member`` (the same two cases at the clip's start or end, where there is nothing to bridge from: no camera);
+``missing_image`` (the clip has no image file for this frame: no camera), ``bad_image`` (its image does not
+decode, or has another size) and ``bridged_missing_image``, ``bridged_bad_image`` (likewise, camera interpolated
+from its neighbours); otherwise the lane status of the frame, e.g. ``too_few_lines``, ``no_straight``).
 
 ``run.json`` also holds the clip ``verdict`` (``"ok"``, ``"unreliable"`` or ``"uncalibrated"``,
-:func:`probreg.inference.verdict.clip_verdict`) with ``verdict_reasons``, the camera side and
-the evidence for both sides (``camera_side``), the notes about the input (``input_notes``:
-ignored files, missing images, absurd keypoints, frames without a detection), the 2D keypoints'
-per-frame ``keypoint_status`` (:func:`probreg.filtering.detection_status`) and, when keypoints
-lay far outside the image, their count per frame (``keypoints_outside_image``).
+:func:`probreg.inference.verdict.clip_verdict`) with ``verdict_reasons``, the camera side and the evidence for
+both sides (``camera_side``), the notes about the input (``input_notes``: ignored files, missing images, absurd
+keypoints, frames without a detection), the 2D keypoints' per-frame ``keypoint_status``
+(:func:`probreg.filtering.detection_status`) and, when keypoints lay far outside the image, their count per
+frame (``keypoints_outside_image``).
 """
 
 from __future__ import annotations
@@ -45,7 +42,8 @@ from .inference.heights import HEIGHT_SYSTEMATIC_SD, height_terms_note
 from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationError
 from .inference.sampling import SamplerSettings
 from .inference.evidence import BRANCHES, BranchChoice, laplace_log_evidence
-from .inference.verdict import bone_length_cv, clip_verdict, knee_band_width, knee_flexion_peak, view_obliquity
+from .inference.verdict import (bone_length_cv, clip_verdict, knee_band_width, knee_flexion_peak, limb_image_length,
+                                view_obliquity)
 from .inference.parallel import default_workers, fork_call, warm_imports
 from .inference.time_base import time_base_check
 from .inference.gait_check import with_time_base
@@ -452,6 +450,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     diag["knee_flexion_peak_deg"] = knee_peak = knee_flexion_peak(summ, clip.fps)
     diag["cadence_stride_pattern_spm"] = pattern_cadence_spm(model.stride_frames(), clip.fps)  # gait_check's
     diag["left_right_exchanged"] = exchanged = {"legs": float(model.exchanged[:, 0].mean())}  # the arms: never
+    diag["leg_image_px"] = legs_px = limb_image_length(model.kp)  # thighs and shanks: long enough to read?
     verdict, reasons = clip_verdict(  # over the frames of the shot estimated (all but with --shot all)
         reg.shots.frames[1] - reg.shots.frames[0], calibrated=sum(c is not None for c in cam_list),
         frames_with_angles=n_angle, cuts=reg.shots.cuts if reg.shots.chosen is None else None,
@@ -461,7 +460,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         stature_draws=flat[:, 1], stature_prior=options.priors.stature, branch=branch,
         member_sensitivity=sensitivity, lanes_agree=agree, noise_rho=model.noise_rho,
         knee_band_deg=knee_band_width(summ), obliquity_deg=obliquity, knee_peak_deg=knee_peak,
-        left_right_exchanged=exchanged, time_base=time_base, lens_conflict=diag.get("given_lens"))
+        left_right_exchanged=exchanged, time_base=time_base, lens_conflict=diag.get("given_lens"),
+        limb_px=legs_px, noise_px=model.noise_sd)
     result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
                        gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
                        verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,

@@ -128,6 +128,24 @@ reason of its own, a short machine-readable string with the number that triggere
     The same set-ups with the generator's keypoints (seeds 7501-7540, 8101-8140, 79 calibrated
     clips) peaked at 92-133°.  The limit is the jogging floor with a margin for the
     lifting's error, and it lies in that gap.)
+``knee flexion beyond the knee's range (peak x deg)``
+    the other end of the same check: the 95th percentile of the knees' flexion exceeds
+    :attr:`VerdictThresholds.max_knee_peak_deg`, 160°, the passive range of a human knee (heel
+    against the buttock; the active range is 135-140°).  Sprinters' swing legs fold to about
+    130° (the generator's runners and the validation clips peak at 96-135°, the CMU capture at
+    103-120°), so a clip past 160° has legs the lifting folded where no leg folds: keypoints
+    that do not lie on a leg (found by feeding the run a skeleton whose joints all sat on one
+    point: knees at 180° with zero-width bands and no other reason).
+``legs too short in the image (x px, keypoint noise y px)``
+    the thighs and shanks are, in the median frame, shorter in the image
+    (:func:`limb_image_length`, hip to knee and knee to ankle of the cleaned keypoints) than
+    :attr:`VerdictThresholds.min_limb_noise_ratio` (3) times the keypoints' noise sd, or than
+    :attr:`VerdictThresholds.min_limb_px` (2 px) where the noise is unknown.  A limb's direction
+    is read from its two end points: at three noise sds of length its direction scatters by
+    about 27° a frame (``atan(sqrt(2) / 3)``), and the ray-cast's depth, which comes from how
+    much shorter than its true length the limb looks, is noise.  The validation clips and the
+    held-out set have legs 11-23 noise sds long (28-177 px); a skeleton collapsed onto a point
+    or a far figure of a few pixels has none to read.
 ``left/right labels unsure (legs exchanged in x % of frames)``
     the keypoints' left/right labels were set right from the motion
     (:func:`probreg.filtering.relabel_left_right`): where the detector gave a leg the other
@@ -162,145 +180,14 @@ import numpy as np
 
 from ..filtering.basic import NOISE_RHO_MAX
 from ..geometry import JOINT_INDEX, camera_centres
+from .reasons import REASON_HELP, explain_reason  # re-exported: the report and users import them from here
 
 __all__ = ["VerdictThresholds", "clip_verdict", "bone_length_cv", "knee_band_width", "knee_flexion_peak",
-           "posterior_modes",
+           "limb_image_length", "posterior_modes",
            "view_obliquity", "REASON_HELP", "explain_reason"]
 
 _LIMBS = {"thigh": ("hip", "knee"), "shank": ("knee", "ankle"), "upper_arm": ("shoulder", "elbow"),
           "forearm": ("elbow", "wrist")}
-
-
-#: For each verdict reason (by the words it starts with): what it means for the results, and what a
-#: user can do about it.  The report shows these beside the reasons.
-REASON_HELP = {
-    "frames_with_angles": (
-        "no frame produced an angle: there is nothing to use",
-        "check the lane overlays and the keypoints (is the athlete detected?)",
-    ),
-    "calibrated_frames": (
-        "too few frames found lanes that give a camera: the rest is guessed from them",
-        "check the lane overlays; a clip with the straight's lines in view calibrates",
-    ),
-    "lanes_agree_frames": (
-        ("many frames' lanes do not fit the clip's static camera: lines were misread, or the broadcast"
-         " cut to another camera"),
-        "check the lane overlays frame by frame; cut the clip to one camera shot",
-    ),
-    "R-hat": (
-        "the sampler did not converge: the bands are not a posterior yet",
-        "run with more --max-steps",
-    ),
-    "ESS": (
-        "too few independent posterior draws of the camera height",
-        "run with more --max-steps",
-    ),
-    "posterior multimodal": (
-        "two different camera heights explain the clip; the median lies between them",
-        "give the camera height (--height-m) or the athlete's stature (--stature) if known",
-    ),
-    "prior-dominated height": (
-        "the clip did not measure the camera height; every metric number rests on the prior",
-        "give the camera height (--height-m) or the athlete's stature (--stature)",
-    ),
-    "height barely fixes the camera": (
-        ("the camera sits where a small change of height is a large change of focal length and "
-         "distance: positions and speeds are loose"),
-        "give the athlete's stature (--stature) or the camera height (--height-m)",
-    ),
-    "camera_side evidence ratio": (
-        "which side of the track the camera stands on is not settled by the motion",
-        "give it (--camera-side main or far) if you know it",
-    ),
-    "branch evidence ratio": (
-        ("a far camera with a long lens and a close one looking down steeply explain the lanes about "
-         "equally well: the scale of everything hangs on the choice"),
-        "give --branch narrow or wide, or the camera height, if known",
-    ),
-    "bone length cv": (
-        "cameras and skeleton do not fit together (rays miss their limb spheres, draws disagree)",
-        "check the keypoints and the lane overlays",
-    ),
-    "running speed": (
-        "the athlete runs faster than any human: the camera puts them at the wrong scale",
-        "check the lane overlays; give the camera height or the stature if known",
-    ),
-    "stature prior conflict": (
-        "the stature left its prior far behind: the camera makes the limbs the wrong size",
-        "check the lane overlays; give the athlete's stature (--stature) if known",
-    ),
-    "keypoint noise unidentified": (
-        ("the 2D detections' noise drifts too slowly to be measured: the smoothing and the bands rest "
-         "on a guessed level"),
-        "use a better 2D pose model",
-    ),
-    "knee band wide": (
-        "the knee bands are too wide to measure the knee at the ~3 deg kinematics needs",
-        "give the camera height or the stature if known; use a clip from a nearer camera",
-    ),
-    "no plausible camera": (
-        ("the lanes allow no camera that the priors and the limbs accept (e.g. spurious lines of a "
-         "grazing view)"),
-        ("check the lane overlays; widen the camera-height prior (--height-m, --height-log-sd) if the "
-         "camera is unusual"),
-    ),
-    "lanes ": (
-        "how many frames ended with this lane status (run.json frame_status, described in the README)",
-        "frames without the straight's lines cannot calibrate",
-    ),
-    "knee flexion peak": (
-        ("the knees never bend as a runner's swing leg does (90-130 deg): the 2D keypoints do not follow "
-         "the legs, or the athlete is not running"),
-        "look at the keypoints on the frames; use a stronger 2D pose model",
-    ),
-    "left/right labels unsure": (
-        ("the 2D detector often called the left leg right: probreg set the labels right from the "
-         "motion, but which leg is the left one is close to a guess"),
-        "compare the left and right curves with the video; use a stronger 2D pose model",
-    ),
-    "oblique view": (
-        ("the camera looks at the runner from far off the side: much of the legs' motion runs along "
-         "the rays, and knee errors average ~4 deg even with the true camera"),
-        "prefer a camera nearer the side of the runner (a main-stand or long-lens view)",
-    ),
-    "camera cut": (
-        ("the clip switches cameras, and it was estimated as one static camera (--shot all): the "
-         "camera height is pulled between two cameras, and every angle may be far off"),
-        "run one shot at a time (the default estimates the longest; --shot N picks shot N)",
-    ),
-    "repeated frames": (
-        ("the stream repeats its frames (e.g. 25 fps content in a 50 fps stream): the motion stops every "
-         "other frame, which the noise model and the smoothing read as motion, and the bands are far too narrow"),
-        "give the frames once each: extract the clip at its content's frame rate",
-    ),
-    "given lens contradicts": (
-        ("the lane lines' curvature under the given k1 puts the camera at another height than the clip's own "
-         "evidence (ground track, planted feet, limbs): a lens calibrated at another zoom, another lens, or "
-         "(on close, low views) height terms that are off themselves"),
-        "check the lens calibration (its zoom setting), or run without --dist to infer the lens",
-    ),
-    **dict.fromkeys(("slow motion", "fast motion", "time base unclear"), (
-        ("the clip's time does not run at its frame rate (a slow-motion replay, or a wrong fps): every "
-         "time-based number (cadence, speed, contact times) is off by that factor, and the smoothing's "
-         "models of the motion are set for another speed"),
-        "give the replay's slow-down, e.g. --slow-motion 4 (or the clip's true frame rate in clip.json)",
-    )),
-}
-
-
-def explain_reason(reason):
-    """``(meaning, what to do)`` of a verdict reason (:data:`REASON_HELP`), or None for a reason
-    it does not know.
-
-    >>> explain_reason("oblique view (48 deg from the side)")[1]
-    'prefer a camera nearer the side of the runner (a main-stand or long-lens view)'
-    >>> explain_reason("something else") is None
-    True
-    """
-    for key in sorted(REASON_HELP, key=len, reverse=True):
-        if str(reason).startswith(key):
-            return REASON_HELP[key]
-    return None
 
 
 @dataclass(frozen=True)
@@ -322,6 +209,9 @@ class VerdictThresholds:
     max_knee_band_deg: float = 35.0
     max_obliquity_deg: float = 35.0
     min_knee_peak_deg: float = 80.0
+    max_knee_peak_deg: float = 160.0
+    min_limb_noise_ratio: float = 3.0
+    min_limb_px: float = 2.0
     max_exchanged_fraction: float = 1.0 / 3.0
 
 
@@ -430,6 +320,27 @@ def knee_flexion_peak(angle_summary, fps, min_seconds=1.0, q=95.0):
     return float(np.percentile(vals, q))
 
 
+def limb_image_length(keypoints_px):
+    """How long the legs are in the image: the median (px) over frames of both thighs' and both
+    shanks' image lengths (hip to knee, knee to ankle); NaN without any.
+
+    >>> kp = np.full((3, 17, 2), np.nan)
+    >>> for s in ("l", "r"):
+    ...     kp[:, JOINT_INDEX[f"{s}_hip"]] = (0, 0); kp[:, JOINT_INDEX[f"{s}_knee"]] = (0, 40)
+    ...     kp[:, JOINT_INDEX[f"{s}_ankle"]] = (30, 80)
+    >>> limb_image_length(kp)   # thighs 40 px, shanks 50 px
+    45.0
+    >>> limb_image_length(np.zeros((3, 17, 3)))   # every joint on one point
+    0.0
+    """
+    kp = np.asarray(keypoints_px, float)[..., :2]
+    parts = [np.linalg.norm(kp[:, JOINT_INDEX[f"{s}_{a}"]] - kp[:, JOINT_INDEX[f"{s}_{b}"]], axis=-1)
+             for s in ("l", "r") for a, b in (_LIMBS["thigh"], _LIMBS["shank"])]
+    lengths = np.concatenate(parts)
+    lengths = lengths[np.isfinite(lengths)]
+    return float(np.median(lengths)) if lengths.size else float("nan")
+
+
 def posterior_modes(samples, min_rel_height=0.1, max_dip=0.5, n_grid=512, ess=None):
     """Locations of the separate modes of a 1-D posterior sample (Gaussian kernel density).
 
@@ -478,8 +389,8 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
                  log_height_prior_sd=None, side=None, bone_cv_pct=None, speed_mps=None,
                  stature_draws=None, stature_prior=None, branch=None, member_sensitivity=None,
                  lanes_agree=None, noise_rho=None, knee_band_deg=None, obliquity_deg=None, knee_peak_deg=None,
-                 left_right_exchanged=None, cuts=None, time_base=None, lens_conflict=None,
-                 thresholds: VerdictThresholds = VerdictThresholds()):
+                 left_right_exchanged=None, cuts=None, time_base=None, lens_conflict=None, limb_px=None,
+                 noise_px=None, thresholds: VerdictThresholds = VerdictThresholds()):
     """The clip verdict and its reasons.
 
     Parameters
@@ -532,6 +443,9 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
         :func:`probreg.inference.time_base.time_base_check` (its ``reason`` when not real time).
     lens_conflict : dict, optional
         A given lens against the height terms (:func:`probreg.inference.heights.lens_conflict`).
+    limb_px, noise_px : float, optional
+        The legs' image length (:func:`limb_image_length`) and the keypoints' noise sd (px; NaN
+        or None when unknown).
 
     Returns
     -------
@@ -555,6 +469,12 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
     ('unreliable', ['oblique view (48 deg from the side)'])
     >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, knee_peak_deg=56.2)
     ('unreliable', ['knee flexion peak 56 deg'])
+    >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, knee_peak_deg=180.0)
+    ('unreliable', ["knee flexion beyond the knee's range (peak 180 deg)"])
+    >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, limb_px=6.1, noise_px=2.5)
+    ('unreliable', ['legs too short in the image (6.1 px, keypoint noise 2.5 px)'])
+    >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, limb_px=40.0, noise_px=2.5)
+    ('ok', [])
     >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, left_right_exchanged={"legs": 0.42})
     ('unreliable', ['left/right labels unsure (legs exchanged in 42 % of frames)'])
     >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, cuts=(40,))
@@ -623,6 +543,13 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
                        f"{c['height_other_m']:.2f} m by the rest; {c['deficit_nats']:.1f} nats)")
     if knee_peak_deg is not None and np.isfinite(knee_peak_deg) and knee_peak_deg < t.min_knee_peak_deg:
         reasons.append(f"knee flexion peak {knee_peak_deg:.0f} deg")
+    if knee_peak_deg is not None and np.isfinite(knee_peak_deg) and knee_peak_deg > t.max_knee_peak_deg:
+        reasons.append(f"knee flexion beyond the knee's range (peak {knee_peak_deg:.0f} deg)")
+    if limb_px is not None and not np.isnan(limb_px):
+        noisy = noise_px is not None and np.isfinite(noise_px) and noise_px > 0
+        if limb_px < max(t.min_limb_px, t.min_limb_noise_ratio * noise_px if noisy else 0.0):
+            reasons.append(f"legs too short in the image ({limb_px:.1f} px, keypoint noise "
+                           + (f"{noise_px:.1f} px)" if noisy else "unknown)"))
     for limb, frac in (left_right_exchanged or {}).items():
         if frac is not None and np.isfinite(frac) and frac > t.max_exchanged_fraction:
             reasons.append(f"left/right labels unsure ({limb} exchanged in {100 * frac:.0f} % of frames)")

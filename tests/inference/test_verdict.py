@@ -269,16 +269,18 @@ def test_every_reason_the_verdict_gives_is_explained():
         log_height_prior_sd=0.05, side=side, bone_cv_pct={"shank": 40.0}, speed_mps=30.0,
         stature_draws=np.full(50, 3.0), stature_prior=NormalPrior(1.80, 0.16),
         member_sensitivity=float("inf"), lanes_agree=(10, 100), noise_rho=0.9, knee_band_deg=50.0,
-        obliquity_deg=60.0, knee_peak_deg=40.0, left_right_exchanged={"legs": 0.45}, branch=branch)
+        obliquity_deg=60.0, knee_peak_deg=40.0, left_right_exchanged={"legs": 0.45}, branch=branch,
+        limb_px=1.0, noise_px=2.0)
     # every check fires once (ESS and multimodality from the same draws)
     starts = ("frames_with_angles", "calibrated_frames", "lanes_agree_frames", "R-hat", "ESS",
               "posterior multimodal", "prior-dominated height", "height barely fixes the camera",
               "camera_side evidence ratio", "branch evidence ratio", "bone length cv", "running speed",
               "stature prior conflict", "keypoint noise unidentified", "knee band wide", "oblique view",
-              "knee flexion peak", "left/right labels unsure")
+              "knee flexion peak", "legs too short in the image", "left/right labels unsure")
     assert [next(r for r in reasons if r.startswith(k)) for k in starts]
     assert len(reasons) == len(starts)
-    for r in reasons + ["no plausible camera (...)", "lanes no_lines 40/40"]:
+    beyond = clip_verdict(100, 100, 100, knee_peak_deg=175.0)[1]
+    for r in reasons + beyond + ["no plausible camera (...)", "lanes no_lines 40/40"]:
         meaning, todo = explain_reason(r)
         assert meaning and todo
     assert explain_reason("not a reason") is None
@@ -331,15 +333,59 @@ def test_real_running_and_the_generators_runner_bend_the_knee_beyond_the_limit(s
     from probreg.inference.verdict import VerdictThresholds, knee_flexion_peak
     from probreg.sim import config_from_preset, synthesize
 
-    limit = VerdictThresholds().min_knee_peak_deg
+    limit, top = VerdictThresholds().min_knee_peak_deg, VerdictThresholds().max_knee_peak_deg
     for path in sorted((shared_data / "mocap").glob("*.npz")):
         d = np.load(path)
         a = joint_angles(d["joints3d"])
         peak = knee_flexion_peak({k: (np.asarray(a[k]),) * 3 for k in ("knee_l", "knee_r")}, float(d["fps"]))
-        assert peak > limit + 15, (path.name, peak)
+        assert limit + 15 < peak < top - 25, (path.name, peak)  # and well inside the knee's range
     clip = synthesize(config_from_preset("run", 3, n_frames=100), seed=3, preset="run")
     a = joint_angles(clip.motion.joints_track_m)
-    assert knee_flexion_peak({k: (np.asarray(a[k]),) * 3 for k in ("knee_l", "knee_r")}, clip.config.fps) > limit + 15
+    peak = knee_flexion_peak({k: (np.asarray(a[k]),) * 3 for k in ("knee_l", "knee_r")}, clip.config.fps)
+    assert limit + 15 < peak < top - 25
+
+
+@pytest.mark.parametrize("peak, flagged", [(135.0, False), (155.0, False), (165.0, True), (180.0, True)])
+def test_knees_folded_beyond_a_human_knee_are_unreliable(peak, flagged):
+    from probreg.inference.verdict import knee_flexion_peak
+
+    value = knee_flexion_peak(_knees(peak, low=20.0), 50.0)
+    verdict, reasons = clip_verdict(**GOOD, knee_peak_deg=value)
+    assert (verdict == "unreliable") == flagged
+    assert reasons == ([f"knee flexion beyond the knee's range (peak {value:.0f} deg)"] if flagged else [])
+
+
+@pytest.mark.parametrize("limb_px, noise_px, flagged", [
+    (45.0, 3.0, False),            # the validation clips' legs: 11-23 noise sds
+    (9.5, 3.0, False),             # a bit over three noise sds
+    (8.5, 3.0, True),              # under three
+    (0.0, 0.0, True),              # every joint on one point, no noise to speak of
+    (1.5, float("nan"), True),     # noise unknown: two pixels at least
+    (5.0, None, False),
+])
+def test_legs_a_few_noise_sds_long_in_the_image_are_unreliable(limb_px, noise_px, flagged):
+    verdict, reasons = clip_verdict(**GOOD, limb_px=limb_px, noise_px=noise_px)
+    assert (verdict == "unreliable") == flagged
+    if flagged:
+        noise = f"{noise_px:.1f} px" if noise_px and np.isfinite(noise_px) else "unknown"
+        assert reasons == [f"legs too short in the image ({limb_px:.1f} px, keypoint noise {noise})"]
+    assert clip_verdict(**GOOD, limb_px=float("nan"), noise_px=3.0) == ("ok", [])
+
+
+def test_leg_length_in_the_image_reads_thighs_and_shanks_only():
+    from probreg.geometry import JOINT_INDEX
+    from probreg.inference.verdict import limb_image_length
+
+    rng = np.random.default_rng(2)
+    kp = rng.normal(500, 300, (30, 17, 3))           # arms, trunk, head anywhere
+    for s in ("l", "r"):
+        kp[:, JOINT_INDEX[f"{s}_hip"], :2] = (100.0, 100.0)
+        kp[:, JOINT_INDEX[f"{s}_knee"], :2] = (100.0, 160.0)   # thighs 60 px
+        kp[:, JOINT_INDEX[f"{s}_ankle"], :2] = (148.0, 196.0)  # shanks 60 px
+    assert limb_image_length(kp) == pytest.approx(60.0)
+    kp[::2, JOINT_INDEX["l_knee"]] = np.nan          # a missing knee drops its two limbs, not the frame
+    assert limb_image_length(kp) == pytest.approx(60.0)
+    assert np.isnan(limb_image_length(np.full((5, 17, 2), np.nan)))
 
 
 @pytest.mark.parametrize("frac, flagged", [(0.0, False), (0.3, False), (0.34, True), (0.5, True)])

@@ -239,7 +239,8 @@ def test_run_end_to_end_with_missing_image_stray_file_and_absurd_keypoint(clip, 
 @pytest.mark.filterwarnings("error::RuntimeWarning")
 def test_joints_all_at_one_pixel_give_a_result_without_numpy_warnings(clip, tmp_path, capsys):
     """Degenerate keypoints (every joint of every frame at one pixel: no limb has a length) end with
-    a result and a verdict, not with numpy's divide-by-zero warnings on the way."""
+    a result and a verdict, not with numpy's divide-by-zero warnings on the way; the verdict says the
+    legs cannot be read (such a run once came out ``ok`` with knees at 180 deg and zero-width bands)."""
     doc = json.loads((clip / "keypoints2d.json").read_text())
     for f in doc["frames"]:
         f["keypoints"] = [[1000.0, 500.0, 0.9]] * 17
@@ -248,7 +249,9 @@ def test_joints_all_at_one_pixel_give_a_result_without_numpy_warnings(clip, tmp_
     err = capsys.readouterr().err
     assert "Warning" not in err and "Traceback" not in err, err
     run = json.loads((tmp_path / "out" / "run.json").read_text())
-    assert code == (0 if run["verdict"] == "ok" else 3) and (tmp_path / "out" / "angles.csv").exists()
+    assert code == 3 and run["verdict"] == "unreliable" and (tmp_path / "out" / "angles.csv").exists()
+    assert run["diagnostics"]["leg_image_px"] == 0.0
+    assert any(r.startswith("legs too short in the image (0.0 px") for r in run["verdict_reasons"]), run
 
 
 # ----------------------------------------------------------------------------- 5. metadata
