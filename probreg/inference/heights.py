@@ -132,9 +132,18 @@ def smear_log_likelihood(grid, ll, sd=HEIGHT_SYSTEMATIC_SD, step=None):
 #: rewarding (out-of-plane motion alone spreads a limb's sagittal length by a few per cent)
 LIMB_SPREAD_FLOOR = 0.01
 
+#: frames' worth of evidence the limbs' consistency term holds at most (0.2.0.dev29).  Its weight
+#: grew with the clip's length without bound, the only height term that did (the track's is per
+#: contact, the static camera's saturates at 25 frames, the planted feet's and the segments' have
+#: systematic floors); the keypoints' bias that moves its minimum off the true height does not
+#: average out over frames.  On 1000-frame clips the 90 % height interval shrank to half the width
+#: of the same scene's first 250 frames and missed the truth on 4 of 7 (docs/method.md).  100 is the
+#: length the intervals' scale (``STATIC_INTERVAL_SCALE``) was calibrated on.
+LIMB_EVIDENCE_FRAMES = 100
+
 
 def limb_consistency(spread, count, frames_per_sample=10.0, floor=LIMB_SPREAD_FLOOR, measured=None,
-                     min_coverage=0.8):
+                     min_coverage=0.8, frames=None, max_frames=LIMB_EVIDENCE_FRAMES):
     """Log-likelihood on the height grid that every segment keeps one length through the clip.
 
     Under the right camera a limb cast onto the athlete's sagittal plane has about the same
@@ -153,7 +162,10 @@ def limb_consistency(spread, count, frames_per_sample=10.0, floor=LIMB_SPREAD_FL
     (``measured``: dict segment -> (G,) number of lengths at each height): near the top of
     the family some frames have no camera, and a spread over the few frames left is not
     comparable (on a given-lens clip it fell from 8 % to 4-5 % with 15-30 of 100 frames, and
-    pulled the height 6 % high).  Spreads below ``floor`` count as ``floor``.
+    pulled the height 6 % high).  Spreads below ``floor`` count as ``floor``.  A clip of more than
+    ``max_frames`` ``frames`` counts as ``max_frames`` (every ``n`` scaled by their ratio,
+    :data:`LIMB_EVIDENCE_FRAMES`): a longer clip measures the spread more finely, but not the bias
+    its keypoints give it.
 
     ``spread``: dict segment -> (G,) array; ``count``: dict segment -> number of lengths the
     keypoints give.
@@ -165,7 +177,10 @@ def limb_consistency(spread, count, frames_per_sample=10.0, floor=LIMB_SPREAD_FL
     >>> few = {"thigh": np.array([200, 200, 60, 0])}  # a third height seen in 30 % of the frames
     >>> np.round(limb_consistency(sp, n, measured=few) - limb_consistency(sp, n)[1], 2)
     array([-13.86,   0.  , -13.86, -13.86])
+    >>> np.round(limb_consistency(sp, n, frames=400) - limb_consistency(sp, n, frames=400)[1], 2)  # 100 of 400
+    array([-3.47,  0.  , -1.12, -3.47])
     """
+    cap = 1.0 if frames is None or frames <= max_frames else float(max_frames) / float(frames)
     total = None
     for s, sp in spread.items():
         sp = np.asarray(sp, float)
@@ -176,7 +191,7 @@ def limb_consistency(spread, count, frames_per_sample=10.0, floor=LIMB_SPREAD_FL
         if not ok.any():
             continue
         sp = np.maximum(np.where(ok, sp, np.max(sp[ok])), floor)
-        n = max(float(count[s]) / frames_per_sample, 1.0)
+        n = max(cap * float(count[s]) / frames_per_sample, 1.0)
         total = -n * np.log(sp) if total is None else total - n * np.log(sp)
     if total is None:
         return np.zeros(len(next(iter(spread.values()), ())))

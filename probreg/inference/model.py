@@ -472,7 +472,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
             slides[g] = self._slides(cams, tr)
         self.ll_static = score_static(static_parts, len(self.grid), n_frames)[0]
         self.ll_limbs = self.limb_consistency_weight * limb_consistency(self.seg_spread, self.seg_count,
-                                                                        measured=self.seg_measured)
+                                                                        measured=self.seg_measured, frames=self.F)
         self._score_slides(slides)
 
     def _stance_windows(self):

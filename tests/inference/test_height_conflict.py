@@ -113,3 +113,22 @@ def test_the_note_says_where_each_term_puts_the_camera():
     assert height_terms_note(split).startswith("camera height terms disagree (static camera 6.00 m, "
                                                "limb consistency 10.00 m; 163.")
     assert agree["temper"] == 1.0 and split["temper"] < 0.01
+
+
+def test_the_limbs_term_holds_at_most_a_hundred_frames_of_evidence():
+    """A clip four times as long measures the same spreads: past
+    :data:`probreg.inference.heights.LIMB_EVIDENCE_FRAMES` frames the term is that of a clip of
+    that length (its keypoints' bias does not average out); shorter clips are untouched."""
+    from probreg.inference.heights import LIMB_EVIDENCE_FRAMES, limb_consistency
+
+    assert LIMB_EVIDENCE_FRAMES == 100
+    spread = {"thigh": np.array([0.08, 0.04, 0.05]), "shank": np.array([0.06, 0.05, 0.09])}
+    short = limb_consistency(spread, {"thigh": 200, "shank": 200}, frames=100)
+    long = limb_consistency(spread, {"thigh": 800, "shank": 800}, frames=400)
+    np.testing.assert_allclose(long, short, rtol=1e-12)
+    # at or under the cap nothing changes: the held-out and validation clips (40-100 frames)
+    np.testing.assert_array_equal(limb_consistency(spread, {"thigh": 140, "shank": 140}, frames=70),
+                                  limb_consistency(spread, {"thigh": 140, "shank": 140}))
+    # uncapped, the long clip's term is four times as sharp
+    sharp = limb_consistency(spread, {"thigh": 800, "shank": 800})
+    np.testing.assert_allclose(sharp - sharp[1], 4 * (short - short[1]), rtol=1e-9)
