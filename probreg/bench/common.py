@@ -32,6 +32,7 @@ BENCHMARKS = {
     "cuts": "probreg.bench.cuts:run",
     "replays": "probreg.bench.replays:run",
     "rails": "probreg.bench.rails:run",
+    "long-clips": "probreg.bench.long_clips:run",
 }
 
 
