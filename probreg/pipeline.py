@@ -461,7 +461,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         member_sensitivity=sensitivity, lanes_agree=agree, noise_rho=model.noise_rho,
         knee_band_deg=knee_band_width(summ), obliquity_deg=obliquity, knee_peak_deg=knee_peak,
         left_right_exchanged=exchanged, time_base=time_base, lens_conflict=diag.get("given_lens"),
-        limb_px=legs_px, noise_px=model.noise_sd)
+        limb_px=legs_px, noise_px=model.noise_sd, fps=clip.fps)
     result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
                        gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
                        verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,

@@ -8,6 +8,12 @@ __all__ = ["REASON_HELP", "explain_reason"]
 #: For each verdict reason (by the words it starts with): what it means for the results, and what a
 #: user can do about it.  The report shows these beside the reasons.
 REASON_HELP = {
+    "short clip": (
+        ("the angles span less than a second: under two strides nothing ties strides together (the "
+         "smoothing, the noise model, the checks of the legs' swing and of the time base), and the "
+         "verdict cannot tell a good result from a bad one"),
+        "give a longer clip: at least a second, better two or more strides (1.5 s)",
+    ),
     "frames_with_angles": (
         "no frame produced an angle: there is nothing to use",
         "check the lane overlays and the keypoints (is the athlete detected?)",

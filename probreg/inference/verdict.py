@@ -8,6 +8,15 @@ reason of its own, a short machine-readable string with the number that triggere
 ``calibrated_frames n/F`` -> ``"uncalibrated"`` when ``n = 0``, else ``"unreliable"``
     fewer than :attr:`VerdictThresholds.min_calibrated` of the frames have a camera
     (lanes found and consistent, or bridged): the rest is guessed from too little.
+``short clip (n frames with angles, x s; ...)`` -> ``"unreliable"``
+    the angles span less than :attr:`VerdictThresholds.min_seconds`, 1 s.  A running stride takes
+    0.6-0.8 s; what ties strides together (the cross-stride smoothing, the noise model read off the
+    stride pattern, the time-base check, the knee-peak check) needs more than one, and without it
+    nothing tells a good short clip from a bad one (the limit is the knee-peak check's, "more than a
+    stride").  Cut from probreg's generator (three scenes, their first 12-80 frames at 50 fps):
+    under 1 s (12-40 frames) the knee errors were 3.3-13.8°, and the other checks were silent on 2
+    of those 12 clips (7.1° at 12 frames, 3.9° at 40); at 1 s 4.7-7.8° (one of three silent, 4.7°);
+    at 1.2-1.6 s 2.4-5.4°.  The judge clips all run longer (validation 1.2-1.6 s, held-out 2-4 s).
 ``lanes_agree_frames n/m`` -> ``"unreliable"``
     of the ``m`` frames that have a camera and whose own lanes were found, only ``n`` (fewer
     than :attr:`VerdictThresholds.min_lane_agreement`, 80 %) have lanes that admit that camera
@@ -195,6 +204,7 @@ class VerdictThresholds:
     """Limits of the verdict's checks (see the module docstring for where each comes from)."""
 
     min_calibrated: float = 0.5
+    min_seconds: float = 1.0
     max_rhat: float = 1.1
     min_ess: float = 100.0
     max_bone_cv_pct: float = 15.0
@@ -390,7 +400,7 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
                  stature_draws=None, stature_prior=None, branch=None, member_sensitivity=None,
                  lanes_agree=None, noise_rho=None, knee_band_deg=None, obliquity_deg=None, knee_peak_deg=None,
                  left_right_exchanged=None, cuts=None, time_base=None, lens_conflict=None, limb_px=None,
-                 noise_px=None, thresholds: VerdictThresholds = VerdictThresholds()):
+                 noise_px=None, fps=None, thresholds: VerdictThresholds = VerdictThresholds()):
     """The clip verdict and its reasons.
 
     Parameters
@@ -446,6 +456,8 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
     limb_px, noise_px : float, optional
         The legs' image length (:func:`limb_image_length`) and the keypoints' noise sd (px; NaN
         or None when unknown).
+    fps : float, optional
+        The clip's frame rate (real time): ``frames_with_angles / fps`` is the time the angles span.
 
     Returns
     -------
@@ -459,6 +471,8 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
     ('unreliable', ['running speed 33.0 m/s'])
     >>> clip_verdict(100, 0, 0)
     ('uncalibrated', ['frames_with_angles 0/100', 'calibrated_frames 0/100'])
+    >>> clip_verdict(40, 40, 40, rhat=1.01, ess=900, fps=50.0)
+    ('unreliable', ['short clip (40 frames with angles, 0.80 s; a stride takes ~0.7 s, the checks need 1 s)'])
     >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, lanes_agree=(41, 100))
     ('unreliable', ['lanes_agree_frames 41/100'])
     >>> clip_verdict(100, 100, 100, rhat=1.01, ess=900, noise_rho=0.9)
@@ -488,6 +502,9 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
     if frames_with_angles == 0:
         reasons.append(f"frames_with_angles 0/{n_frames}")
         uncal = True
+    if fps and frames_with_angles > 0 and frames_with_angles / float(fps) < t.min_seconds:
+        reasons.append(f"short clip ({frames_with_angles} frames with angles, {frames_with_angles / float(fps):.2f} s; "
+                       f"a stride takes ~0.7 s, the checks need {t.min_seconds:g} s)")
     if calibrated == 0 or calibrated < t.min_calibrated * n_frames:
         reasons.append(f"calibrated_frames {calibrated}/{n_frames}")
         uncal = uncal or calibrated == 0

@@ -270,16 +270,16 @@ def test_every_reason_the_verdict_gives_is_explained():
         stature_draws=np.full(50, 3.0), stature_prior=NormalPrior(1.80, 0.16),
         member_sensitivity=float("inf"), lanes_agree=(10, 100), noise_rho=0.9, knee_band_deg=50.0,
         obliquity_deg=60.0, knee_peak_deg=40.0, left_right_exchanged={"legs": 0.45}, branch=branch,
-        limb_px=1.0, noise_px=2.0)
+        limb_px=1.0, noise_px=2.0, fps=50.0)
     # every check fires once (ESS and multimodality from the same draws)
-    starts = ("frames_with_angles", "calibrated_frames", "lanes_agree_frames", "R-hat", "ESS",
+    starts = ("frames_with_angles", "calibrated_frames", "lanes_agree_frames", "R-hat", "ESS",  # no angles: not short
               "posterior multimodal", "prior-dominated height", "height barely fixes the camera",
               "camera_side evidence ratio", "branch evidence ratio", "bone length cv", "running speed",
               "stature prior conflict", "keypoint noise unidentified", "knee band wide", "oblique view",
               "knee flexion peak", "legs too short in the image", "left/right labels unsure")
     assert [next(r for r in reasons if r.startswith(k)) for k in starts]
     assert len(reasons) == len(starts)
-    beyond = clip_verdict(100, 100, 100, knee_peak_deg=175.0)[1]
+    beyond = clip_verdict(100, 100, 100, knee_peak_deg=175.0)[1] + clip_verdict(10, 10, 10, fps=50.0)[1]
     for r in reasons + beyond + ["no plausible camera (...)", "lanes no_lines 40/40"]:
         meaning, todo = explain_reason(r)
         assert meaning and todo
@@ -395,3 +395,22 @@ def test_legs_relabelled_in_a_third_of_the_frames_are_unsure(frac, flagged):
     assert reasons == ([f"left/right labels unsure (legs exchanged in {100 * frac:.0f} % of frames)"]
                        if flagged else [])
     assert clip_verdict(**GOOD, left_right_exchanged={"legs": float("nan")}) == ("ok", [])
+
+
+@pytest.mark.parametrize("frames, fps, flagged", [
+    (12, 50.0, True),      # 0.24 s: a quarter of a stride
+    (49, 50.0, True),
+    (50, 50.0, False),     # one second: the limit
+    (60, 50.0, False),     # the shortest validation clips (1.2 s)
+    (24, 25.0, True),
+    (40, 25.0, False),     # v07_random_25fps: 1.6 s
+    (12, None, False),     # frame rate not given: no check
+])
+def test_clips_under_a_second_of_angles_are_short(frames, fps, flagged):
+    verdict, reasons = clip_verdict(frames, frames, frames, rhat=1.01, ess=900, fps=fps)
+    assert (verdict == "unreliable") == flagged
+    if flagged:
+        assert reasons == [f"short clip ({frames} frames with angles, {frames / fps:.2f} s; a stride takes ~0.7 s, "
+                           "the checks need 1 s)"]
+    # the frames that carry angles count, not the clip's frames
+    assert clip_verdict(200, 200, frames, rhat=1.01, ess=900, fps=fps)[1][:1] == (reasons[:1] if flagged else [])
