@@ -141,8 +141,8 @@ reason of its own, a short machine-readable string with the number that triggere
     the other end of the same check: the 95th percentile of the knees' flexion exceeds
     :attr:`VerdictThresholds.max_knee_peak_deg`, 160°, the passive range of a human knee (heel
     against the buttock; the active range is 135-140°).  Sprinters' swing legs fold to about
-    130° (the generator's runners and the validation clips peak at 96-135°, the CMU capture at
-    103-120°), so a clip past 160° has legs the lifting folded where no leg folds: keypoints
+    130° (by this measure the validation and held-out clips' runs peak at 96-135°, the CMU
+    capture at 101-114°), so a clip past 160° has legs the lifting folded where no leg folds: keypoints
     that do not lie on a leg (found by feeding the run a skeleton whose joints all sat on one
     point: knees at 180° with zero-width bands and no other reason).
 ``legs too short in the image (x px, keypoint noise y px)``
