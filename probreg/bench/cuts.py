@@ -171,9 +171,10 @@ def run(args):
 
         rows = _no_cut_rows(no_cut)
         wrong = [r for r in rows if r[1] != "none"]
+        n_val = sum(not c.name.startswith("heldout_") for c in no_cut)
         rep.add("## Clips without a cut (the lane step alone)\n\n"
-                f"Clips: {len(rows)} ({'the 10 validation clips and ' if val is not None else ''}"
-                f"the 40 held-out clips). Cuts found in them: **{len(wrong)}** "
+                f"Clips: {len(rows)} ({f'the {n_val} validation clips and ' if n_val else ''}"
+                f"the {len(rows) - n_val} held-out clips). Cuts found in them: **{len(wrong)}** "
                 f"({', '.join(r[0] for r in wrong) or 'none'}). Largest colour change "
                 f"{max(r[2] for r in rows):.4f} (threshold 0.05), largest lane step "
                 f"{np.nanmax([r[3] for r in rows]):.4f} (threshold 0.10 or 30 x the clip's own noise).\n\n"
