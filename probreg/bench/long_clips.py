@@ -42,20 +42,25 @@ CUT_FRAMES = 250
 
 def write_long_clip(root, seed, n_frames=LONG_FRAMES, jobs=None):
     """The default generator's clip at ``seed`` with ``n_frames`` frames in ``root/long_<seed>``
-    (written once: an existing clip folder is reused); returns its path."""
-    from ..sim import config_from_preset, synthesize, write_clip
+    (:func:`probreg.sim.replays.write_generated_clip`: written atomically, a clip this bench wrote
+    there before is reused, a folder probreg did not write is refused); returns its path."""
+    from ..sim import config_from_preset
+    from ..sim.replays import write_generated_clip
 
-    out = Path(root) / f"long_{seed}"
-    if (out / "clip.json").exists():
-        return out
-    clip = synthesize(config_from_preset("default", int(seed), n_frames=int(n_frames)), seed=int(seed), preset="default")
-    return write_clip(clip, out, images=True, jobs=jobs)
+    cfg = config_from_preset("default", int(seed), n_frames=int(n_frames))
+    return write_generated_clip(Path(root) / f"long_{seed}", cfg, seed, GENERATOR, {}, "default", jobs=jobs)
+
+
+#: ``clip.json``'s generator name of the clips this bench writes (a clip found there is reused only with it)
+GENERATOR = "probreg.bench.long_clips"
 
 
 def cut_clip(src, dst, n_frames):
     """The first ``n_frames`` frames of the clip ``src`` as the clip ``dst``: images (hard links
     where the file system allows, else copies), ``clip.json``, the keypoints of those frames and
-    the ground truth cut likewise; an existing ``dst`` with a ``clip.json`` is reused.
+    the ground truth cut likewise, written atomically (:func:`probreg.io.output.atomic_output_dir`:
+    a folder probreg did not write is refused).  A cut of the same clip to the same length written
+    there before is reused.
 
     >>> import tempfile, numpy as np
     >>> root = Path(tempfile.mkdtemp())
@@ -71,39 +76,42 @@ def cut_clip(src, dst, n_frames):
     (['000000.jpg', '000001.jpg'], 2)
     >>> np.load(b / "groundtruth" / "joints3d.npy").shape, json.loads((b / "keypoints2d.json").read_text())["frames"]
     ((2, 17, 3), [{'frame': 0, 'keypoints': None}])
+    >>> cut_clip(root / "a", root / "b", 2) == b     # reused
+    True
     >>> shutil.rmtree(root)
     """
-    src, dst = Path(src), Path(dst)
-    if (dst / "clip.json").exists():
-        return dst
-    n = int(n_frames)
-    dst.parent.mkdir(parents=True, exist_ok=True)
-    # written beside, then renamed: an interrupted cut never looks like a clip (nothing is deleted)
-    tmp = Path(tempfile.mkdtemp(prefix=f"{dst.name}.partial-", dir=dst.parent))
-    (tmp / "frames").mkdir()
-    for p in sorted((src / "frames").iterdir()):
-        if p.stem.isdigit() and int(p.stem) < n:
-            try:
-                os.link(p, tmp / "frames" / p.name)
-            except OSError:
-                shutil.copy2(p, tmp / "frames" / p.name)
-    meta = json.loads((src / "clip.json").read_text())
-    (tmp / "clip.json").write_text(json.dumps({**meta, "n_frames": n}, indent=1))
-    kp = json.loads((src / "keypoints2d.json").read_text())
-    kp["frames"] = [f for f in kp["frames"] if int(f["frame"]) < n]
-    (tmp / "keypoints2d.json").write_text(json.dumps(kp))
-    gt_src, gt = src / "groundtruth", tmp / "groundtruth"
-    gt.mkdir()
-    for p in gt_src.iterdir():
-        if p.suffix == ".npy":
-            np.save(gt / p.name, np.load(p)[:n])
-        elif p.name == "cameras.json":
-            cams = json.loads(p.read_text())
-            cams["frames"] = [c for c in cams["frames"] if int(c["frame"]) < n]
-            (gt / p.name).write_text(json.dumps(cams))
-        else:
-            shutil.copy2(p, gt / p.name)
-    tmp.rename(dst)
+    from ..io.output import MARKER, atomic_output_dir
+
+    src, dst, n = Path(src), Path(dst), int(n_frames)
+    made_by = {"name": GENERATOR, "cut_from": src.name, "frames": n}
+    try:
+        if json.loads((dst / "clip.json").read_text()).get("generator") == made_by and (dst / MARKER).exists():
+            return dst
+    except (OSError, ValueError):
+        pass
+    with atomic_output_dir(dst) as out:
+        (out / "frames").mkdir()
+        for p in sorted((src / "frames").iterdir()):
+            if p.stem.isdigit() and int(p.stem) < n:
+                try:
+                    os.link(p, out / "frames" / p.name)
+                except OSError:
+                    shutil.copy2(p, out / "frames" / p.name)
+        meta = json.loads((src / "clip.json").read_text())
+        (out / "clip.json").write_text(json.dumps({**meta, "n_frames": n, "generator": made_by}, indent=1))
+        kp = json.loads((src / "keypoints2d.json").read_text())
+        kp["frames"] = [f for f in kp["frames"] if int(f["frame"]) < n]
+        (out / "keypoints2d.json").write_text(json.dumps(kp))
+        (out / "groundtruth").mkdir()
+        for p in (src / "groundtruth").iterdir():
+            if p.suffix == ".npy":
+                np.save(out / "groundtruth" / p.name, np.load(p)[:n])
+            elif p.name == "cameras.json":
+                cams = json.loads(p.read_text())
+                cams["frames"] = [c for c in cams["frames"] if int(c["frame"]) < n]
+                (out / "groundtruth" / p.name).write_text(json.dumps(cams))
+            else:
+                shutil.copy2(p, out / "groundtruth" / p.name)
     return dst
 
 

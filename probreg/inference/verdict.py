@@ -502,8 +502,9 @@ def clip_verdict(n_frames, calibrated, frames_with_angles, rhat=None, ess=None, 
     if frames_with_angles == 0:
         reasons.append(f"frames_with_angles 0/{n_frames}")
         uncal = True
-    if fps and frames_with_angles > 0 and frames_with_angles / float(fps) < t.min_seconds:
-        reasons.append(f"short clip ({frames_with_angles} frames with angles, {frames_with_angles / float(fps):.2f} s; "
+    span_s = frames_with_angles / float(fps) if fps else float("inf")
+    if 0 < span_s < t.min_seconds:
+        reasons.append(f"short clip ({frames_with_angles} frames with angles, {span_s:.2f} s; "
                        f"a stride takes ~0.7 s, the checks need {t.min_seconds:g} s)")
     if calibrated == 0 or calibrated < t.min_calibrated * n_frames:
         reasons.append(f"calibrated_frames {calibrated}/{n_frames}")
