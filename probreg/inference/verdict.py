@@ -16,7 +16,9 @@ reason of its own, a short machine-readable string with the number that triggere
     stride").  Cut from probreg's generator (three scenes, their first 12-80 frames at 50 fps):
     under 1 s (12-40 frames) the knee errors were 3.3-13.8°, and the other checks were silent on 2
     of those 12 clips (7.1° at 12 frames, 3.9° at 40); at 1 s 4.7-7.8° (one of three silent, 4.7°);
-    at 1.2-1.6 s 2.4-5.4°.  The judge clips all run longer (validation 1.2-1.6 s, held-out 2-4 s).
+    at 1.2-1.6 s 2.4-5.4°.  The validation clips have angles over 1.18-1.6 s; of the held-out clips
+    only 9036 falls under (37 frames with angles, 0.74 s), already ``unreliable`` for ``calibrated_frames
+    37/100``.
 ``lanes_agree_frames n/m`` -> ``"unreliable"``
     of the ``m`` frames that have a camera and whose own lanes were found, only ``n`` (fewer
     than :attr:`VerdictThresholds.min_lane_agreement`, 80 %) have lanes that admit that camera
