@@ -22,6 +22,7 @@ frame (``keypoints_outside_image``).
 
 from __future__ import annotations
 
+import os
 import time
 import warnings
 from dataclasses import dataclass, field, replace
@@ -53,6 +54,7 @@ from .io.frames import has_frames
 from .io.output import atomic_output_dir, prepare_output
 from .io.opensim import write_mot, write_trc
 from .io.results import write_angles_csv, write_gait_cycle_csv, write_joints_npz
+from .io.video import VIDEO_SUFFIXES, is_video, link_or_copy, probe_video  # noqa: F401 -- re-exported
 from .lanes.shots import is_shot_option, restrict_clip
 
 __all__ = ["RunOptions", "RunResult", "run_clip", "run_source", "detect_athlete", "probe_video", "is_video",
@@ -275,10 +277,12 @@ def _branch_candidate(clip, reg, options, given, branch):
 def _forked_evidence(clip, reg, options, given, branch):
     """Start the log evidence of ``branch`` in a forked process (the caller builds the other branch
     meanwhile); returns a function that waits for ``("ok", log_z)`` or ``("error", message)``."""
+    parent = os.getpid()
 
-    def work():
+    def work():  # a forked process changes its own copy of ``reg``; run here, it takes one
         try:
-            return "ok", laplace_log_evidence(_branch_candidate(clip, reg, options, given, branch)[3],
+            r = reg if os.getpid() != parent else reg.branch_copy()
+            return "ok", laplace_log_evidence(_branch_candidate(clip, r, options, given, branch)[3],
                                               seed=options.sampler.seed)[0]
         except NoCalibrationError as exc:
             return "error", (str(exc), exc.reason)
@@ -291,8 +295,6 @@ def _branch_models(clip, reg, options, given, log):
     compares both, :mod:`probreg.inference.evidence`), with its own camera side and lens:
     ``(registration, side, lens, model, BranchChoice)``.  Raises :class:`NoCalibrationError`
     when no branch has a camera."""
-    import copy
-
     t0 = time.perf_counter()
     if options.branch != "auto":
         cand = _branch_candidate(clip, reg, options, given, options.branch)
@@ -300,10 +302,10 @@ def _branch_models(clip, reg, options, given, log):
     else:
         # the narrow branch (the usual broadcast camera) is built here, the wide one's evidence
         # comes from a forked process meanwhile; the wide model is built here only if it wins
-        wide = _forked_evidence(clip, copy.deepcopy(reg), options, given, "wide")
+        wide = _forked_evidence(clip, reg, options, given, "wide")
         logz, errors, reasons, cand = {}, {}, {}, None
         try:
-            cand = _branch_candidate(clip, copy.deepcopy(reg), options, given, "narrow")
+            cand = _branch_candidate(clip, reg.branch_copy(), options, given, "narrow")
             logz["narrow"] = laplace_log_evidence(cand[3], seed=options.sampler.seed)[0]
         except NoCalibrationError as exc:
             errors["narrow"], reasons["narrow"] = str(exc), exc.reason
@@ -351,10 +353,21 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     result folder is written with verdict ``"uncalibrated"``, NaN angles and every frame's lane status.
 
     ``protect``: more inputs the output may not be or lie in; ``extra_files`` ({name: path}): copied in.
+
+    The run's numerical libraries (BLAS) use one thread: its work is shared out over processes
+    (:mod:`probreg.inference.parallel`), and BLAS threads on top only compete with them (the
+    benchmark suite's ``run_a``: 5 % less wall time, 1 s less CPU on two cores; on one core the
+    same wall time and 25 % less CPU).  The caller's limits are restored afterwards.
     """
+    from threadpoolctl import threadpool_limits
+
+    with threadpool_limits(limits=1):
+        return _run_clip(clip_dir, out_dir, options, log, protect, extra_files)
+
+
+def _run_clip(clip_dir, out_dir, options, log, protect, extra_files):
     t0 = time.perf_counter()
-    # options that cannot work are refused before any work
-    if options.lens not in ("infer", "none"):
+    if options.lens not in ("infer", "none"):  # options that cannot work are refused before any work
         raise ValueError(f"lens must be 'infer' or 'none', got {options.lens!r}")
     if options.branch not in (*BRANCHES, "auto"):
         raise ValueError(f"branch must be auto, narrow or wide, got {options.branch!r}")
@@ -471,6 +484,7 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=inputs, log=log) as tmp:
         if options.report:  # most figures render on the other core while the files are written here
             figures = fork_call(lambda: render_figures(clip, result, REPORT_FIGURES_ELSEWHERE))
+        netcdf = fork_call(lambda: idata.to_netcdf(str(tmp / "posterior.nc")))  # xarray's ~1 s: the other core
         _copy_extra(tmp, extra_files)
         bands = [{k: v[i] for k, v in summ.items()} for i in range(3)]  # median, lo, hi per angle
         write_angles_csv(tmp / "angles.csv", clip.fps, *bands)
@@ -481,7 +495,6 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
         cj = camera_json(cam_list, height["median"], clip.n_frames, height["lo"], height["hi"])
         cj["k1"] = {k: lens_doc[k] for k in ("median", "lo", "hi", "source")}
         write_json(tmp / "camera.json", cj)
-        idata.to_netcdf(str(tmp / "posterior.nc"))
         write_json(tmp / "gait.json", gait_s)
         extra = {} if (kpo := clip.keypoints_outside) is None else {"keypoints_outside_image": kpo.tolist()}
         write_json(tmp / "run.json", {"verdict": verdict, "verdict_reasons": reasons,
@@ -499,69 +512,12 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
                                      "priors": options.priors.describe()})
         if options.report:  # a failure in a process draws its figures again here, and raises as itself
             run_report(tmp / "report.html", clip, result, joints_med, cam_list, rendered={**early(), **figures()})
+        netcdf()
     if gait_reasons:
         log(f"warning: gait numbers from the contacts unreliable ({'; '.join(gait_reasons)}): see gait.json's status")
     log(f"height {height['median']:.2f} m [{height['lo']:.2f}, {height['hi']:.2f}]; "
         f"{diag['steps']} steps (tau max {max(diag['tau'].values()):.0f}); total {timings['total_s']:.1f} s")
     return result
-
-
-#: file endings ``probreg run`` takes for a video (anything OpenCV's FFmpeg backend decodes works)
-VIDEO_SUFFIXES = (".mp4", ".mov", ".avi", ".mkv", ".m4v", ".mpg", ".mpeg", ".webm", ".mts", ".ts")
-
-
-def is_video(path):
-    """Whether ``path`` is a video file (by its ending) rather than a clip folder."""
-    p = Path(path)
-    return p.suffix.lower() in VIDEO_SUFFIXES and not p.is_dir()
-
-
-def probe_video(path, fps=None):
-    """``(fps, (width, height), n_frames)`` of a video, read through OpenCV.
-
-    The frame count is decoded when the container does not state it.  ``fps`` overrides a missing
-    or wrong rate in the container.
-
-    Raises
-    ------
-    ClipFormatError
-        When the file is missing, cannot be decoded, or states no frame rate and none is given.
-    """
-    import cv2
-
-    path = Path(path)
-    if not path.is_file():
-        raise ClipFormatError(f"{path}: no such video file")
-    cap = cv2.VideoCapture(str(path))
-    try:
-        if not cap.isOpened():
-            raise ClipFormatError(f"{path}: cannot open the video (not a video, or a codec OpenCV cannot decode)")
-        rate = float(fps) if fps else float(cap.get(cv2.CAP_PROP_FPS) or 0.0)
-        size = (int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT)))
-        n = int(cap.get(cv2.CAP_PROP_FRAME_COUNT) or 0)
-        if n <= 0:
-            n = 0
-            while cap.grab():
-                n += 1
-    finally:
-        cap.release()
-    if n <= 0 or min(size) <= 0:
-        raise ClipFormatError(f"{path}: the video has no decodable frames")
-    if not (rate > 0 and np.isfinite(rate)):
-        raise ClipFormatError(f"{path}: the video states no frame rate; give it with --fps")
-    return rate, size, n
-
-
-def _link_or_copy(src, dst):
-    import shutil
-
-    try:
-        dst.symlink_to(Path(src).resolve())
-    except OSError:  # no symlinks here (some file systems): copy
-        if Path(src).is_dir():
-            shutil.copytree(src, dst)
-        else:
-            shutil.copyfile(src, dst)
 
 
 def detect_athlete(clip, model_path, det_model=None, athlete=None, min_score=0.3, progress=None):
@@ -611,7 +567,6 @@ def run_source(source, out_dir, options: RunOptions = RunOptions(), model=None, 
     import tempfile
 
     from .io.clip import write_keypoints_json
-
     if fps is not None and not FPS_RANGE[0] <= float(fps) <= FPS_RANGE[1]:  # NaN fails too
         raise ValueError(f"--fps must be a frame rate between {FPS_RANGE[0]:g} and {FPS_RANGE[1]:g}, got {fps}")
     source = Path(source)
@@ -627,7 +582,7 @@ def run_source(source, out_dir, options: RunOptions = RunOptions(), model=None, 
         clip_dir.mkdir()
         if video:
             rate, size, n = probe_video(source, fps)
-            _link_or_copy(source, clip_dir / "video.mp4")
+            link_or_copy(source, clip_dir / "video.mp4")
             write_json(clip_dir / "clip.json", {"fps": rate, "image_size": list(size), "n_frames": n,
                                                 "source": {"video": str(source)}})
             log(f"video: {n} frames, {size[0]}x{size[1]}, {rate:g} fps")
@@ -637,7 +592,7 @@ def run_source(source, out_dir, options: RunOptions = RunOptions(), model=None, 
             (clip_dir / "clip.json").write_bytes((source / "clip.json").read_bytes())
             for name in ("frames", "video.mp4"):
                 if (source / name).exists():
-                    _link_or_copy(source / name, clip_dir / name)
+                    link_or_copy(source / name, clip_dir / name)
         clip = load_clip(clip_dir, min_score=options.min_score)
         if not has_frames(clip):
             raise ClipFormatError(f"{source}: no frames to detect the athlete in")

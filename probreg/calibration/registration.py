@@ -9,6 +9,7 @@ anchors them to the athlete's lane.
 
 from __future__ import annotations
 
+import copy
 from dataclasses import dataclass, replace
 
 import numpy as np
@@ -98,6 +99,11 @@ class ClipRegistration:
     #: the clip's camera shots and the one estimated (:func:`probreg.lanes.shots.split_shots`;
     #: None when the registration was not made from the clip's frames)
     shots: object = None
+
+    def branch_copy(self):
+        """An independent copy to orient and build a branch's model on (the families, caches and
+        camera side are its own); the frames' lanes, frozen and never changed, are shared."""
+        return copy.deepcopy(self, {id(self.frame_lanes): self.frame_lanes})
 
     def status_counts(self):
         out = {}

@@ -2,6 +2,7 @@
 (:func:`probreg.__main__.entry`): what it printed and wrote must be whole, its exit code kept."""
 
 import json
+import os
 import subprocess
 import sys
 
@@ -89,3 +90,25 @@ def test_dask_is_kept_out_only_of_a_fresh_single_process_command(monkeypatch):
     assert keep_dask_out("batch") is False and "dask" not in sys.modules
     assert keep_dask_out("run") is True and sys.modules["dask"] is None
     monkeypatch.delitem(sys.modules, "dask")  # the test process keeps its Dask
+
+
+def test_single_process_commands_start_blas_with_one_thread():
+    """``probreg run`` sets one BLAS thread before NumPy loads (:func:`probreg.__main__.one_blas_thread`):
+    ``import probreg`` loads no NumPy, the limit reaches every OpenBLAS NumPy and SciPy load, and a
+    user's own setting, ``batch``/``bench``, or a process with NumPy already loaded are left alone."""
+    code = ("import os, sys\nimport probreg\nfrom probreg.__main__ import one_blas_thread\n"
+            "before = 'numpy' in sys.modules\nset_ = one_blas_thread(sys.argv[1])\n"
+            "import numpy, scipy.linalg\nfrom threadpoolctl import threadpool_info\n"
+            "n = sorted({d['num_threads'] for d in threadpool_info() if d['internal_api'] == 'openblas'})\n"
+            "print(before, set_, os.environ.get('OPENBLAS_NUM_THREADS'), n)\n")
+    env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
+
+    def run(command, **extra):
+        out = subprocess.run([sys.executable, "-c", code, command], capture_output=True, text=True, check=False,
+                             env={**env, **extra})
+        assert out.returncode == 0, out.stderr
+        return out.stdout.strip()
+
+    assert run("run") == "False True 1 [1]"
+    assert run("run", OPENBLAS_NUM_THREADS="2") == "False False 2 [2]"  # the user's choice stands
+    assert run("bench").startswith("False False None")  # OpenBLAS's own default (one per core)
