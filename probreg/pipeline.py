@@ -355,9 +355,9 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
     ``protect``: more inputs the output may not be or lie in; ``extra_files`` ({name: path}): copied in.
 
     The run's numerical libraries (BLAS) use one thread: its work is shared out over processes
-    (:mod:`probreg.inference.parallel`), and BLAS threads on top only compete with them (the
-    benchmark suite's ``run_a``: 5 % less wall time, 1 s less CPU on two cores; on one core the
-    same wall time and 25 % less CPU).  The caller's limits are restored afterwards.
+    (:mod:`probreg.inference.parallel`) on small arrays, and BLAS threads on top only compete
+    with them (the benchmark suite's ``run_a`` with ``PROBREG_WORKERS=1``: the same wall time
+    with or without them, 25 % less CPU without).  The caller's limits are restored afterwards.
     """
     from threadpoolctl import threadpool_limits
 
