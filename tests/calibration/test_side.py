@@ -75,3 +75,22 @@ def test_the_user_can_override_the_side(infield_clip):
     side = reg.orient(12.0, clip.keypoints_px, fps=clip.fps, given="main")
     assert side.chosen == "main" and side.source == "given"
     assert side.cues["knee_fold"]["llr"] < 0  # the evidence is still reported
+
+
+def test_a_branch_copy_is_oriented_and_branched_on_its_own(infield_clip):
+    """``ClipRegistration.branch_copy``, on which each family branch is built (one copy each, the
+    original left for the branch that wins): orienting the copy on a branch leaves the original as
+    it was, the frozen lane measurements are shared, and the original oriented afterwards gives
+    the copy's cameras."""
+    clip = load_clip(infield_clip)
+    reg = register_clip(clip)
+    forward, sequence = reg.forward_px.copy(), reg.sequence
+    dup = reg.branch_copy()
+    assert dup.frame_lanes is reg.frame_lanes and dup.sequence is not reg.sequence
+    assert dup.orient(12.0, clip.keypoints_px, "wide", fps=clip.fps).chosen == "far"
+    assert reg.sequence is sequence and sequence.branch == "narrow" and np.array_equal(reg.forward_px, forward)
+    assert not np.array_equal(dup.forward_px, forward) and not getattr(reg, "_oriented", False)
+    reg.orient(12.0, clip.keypoints_px, "wide", fps=clip.fps)
+    a, b = reg.cameras(12.0, branch="wide")[0], dup.cameras(12.0, branch="wide")[0]
+    assert [c is None for c in a] == [c is None for c in b] and sum(c is not None for c in a) > 30
+    assert all(np.allclose(x.C, y.C) and np.allclose(x.R, y.R) for x, y in zip(a, b) if x is not None)
