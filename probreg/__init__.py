@@ -26,3 +26,13 @@ def __getattr__(name):
 
         return getattr(geometry, name)
     raise AttributeError(f"module 'probreg' has no attribute {name!r}")
+
+
+def __dir__():
+    """The package's names, the lazily imported ones included (tab completion in a notebook).
+
+    >>> import probreg
+    >>> {"Camera", "joint_angles"} <= set(dir(probreg))
+    True
+    """
+    return sorted(set(globals()) | set(__all__))
