@@ -34,6 +34,7 @@ hours compare through it.  With ``--baseline DIR`` (a source tree of another rev
 from __future__ import annotations
 
 import json
+import os
 import resource
 import subprocess
 import sys
@@ -52,11 +53,31 @@ def _children_cpu():
     return u.ru_utime + u.ru_stime
 
 
-def _wall(cmd, cpu=None, env=None):
-    """Wall time and exit code of ``cmd`` (in environment ``env``, default this one's); its CPU
-    seconds (all its processes) go to ``cpu``."""
+#: this bench's own source tree (the checkout its ``probreg`` comes from)
+HERE = Path(__file__).resolve().parents[2]
+
+
+def tree_env(tree, base=None):
+    """The environment that makes ``python -m probreg`` (or ``-c``) import ``probreg`` from ``tree``:
+    ``tree`` first on ``PYTHONPATH`` and ``PYTHONSAFEPATH`` set, so that Python does not put the
+    working folder (which may be another checkout) ahead of it (``-m`` and ``-c`` prepend it).
+
+    >>> env = tree_env("/src/a", {"PYTHONPATH": "/x"})
+    >>> env["PYTHONPATH"].split(os.pathsep), env["PYTHONSAFEPATH"]
+    (['/src/a', '/x'], '1')
+    """
+    env = dict(os.environ if base is None else base)
+    env["PYTHONPATH"] = os.pathsep.join([str(tree)] + [p for p in [env.get("PYTHONPATH")] if p])
+    env["PYTHONSAFEPATH"] = "1"
+    return env
+
+
+def _wall(cmd, cpu=None, env=None, tree=HERE):
+    """Wall time and exit code of ``cmd`` run with the ``probreg`` of source tree ``tree`` (default
+    this bench's own; :func:`tree_env` on top of ``env``, default this environment), from a neutral
+    working folder; its CPU seconds (all its processes) go to ``cpu``."""
     c0, t0 = _children_cpu(), time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=env)
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=tree_env(tree, env), cwd=tempfile.gettempdir())
     wall = time.perf_counter() - t0
     if cpu is not None:
         cpu.append(_children_cpu() - c0)
@@ -107,13 +128,13 @@ def source_tree(path):
 
 
 def _paired(commands, pairs):
-    """Each of ``commands`` ({label: (argv, env)}) run ``pairs`` times, alternating in that order:
+    """Each of ``commands`` ({label: (argv, source tree)}) run ``pairs`` times, alternating in that order:
     ``{label: (walls, cpus, exit codes)}``."""
     out = {k: ([], [], []) for k in commands}
     for _ in range(int(pairs)):
-        for label, (cmd, env) in commands.items():
+        for label, (cmd, tree) in commands.items():
             walls, cpus, codes = out[label]
-            wall, code = _wall(cmd, cpu=cpus, env=env)
+            wall, code = _wall(cmd, cpu=cpus, tree=tree)
             walls.append(wall)
             codes.append(code)
     return out
@@ -121,14 +142,11 @@ def _paired(commands, pairs):
 
 def _baseline_section(py, clip, tmp, baseline, pairs):
     """The clip run alternately with the ``baseline`` tree and with this one: a table and numbers."""
-    import os
-
-    here = Path(__file__).resolve().parents[2]
     commands = {}
-    for label, tree in (("baseline", baseline), ("this tree", here)):
+    for label, tree in (("baseline", baseline), ("this tree", HERE)):
         out = Path(tmp) / f"paired_{label.replace(' ', '_')}"
         argv = [py, "-m", "probreg", "run", str(clip), "--out", str(out), "--seed", "0", "--quiet", "--overwrite"]
-        commands[label] = (argv, {**os.environ, "PYTHONPATH": str(tree)})
+        commands[label] = (argv, tree)
     res = _paired(commands, pairs)
     rows = [[label, ", ".join(f"{w:.2f}" for w in walls), float(np.mean(walls)), float(np.mean(cpus)),
              ", ".join(map(str, sorted(set(codes))))] for label, (walls, cpus, codes) in res.items()]

@@ -26,18 +26,17 @@ def test_cpu_of_a_command_includes_its_forked_workers():
     assert _wall([sys.executable, "-c", "pass"])[1] == 0
 
 
-def test_paired_runs_alternate_and_count_each_commands_cpu(tmp_path):
-    import os
-
+def test_paired_runs_alternate_and_count_each_commands_cpu(tmp_path, monkeypatch):
     import pytest
 
-    from probreg.bench.speed import _paired, source_tree
+    from probreg.bench.speed import HERE, _paired, source_tree
 
+    monkeypatch.chdir(HERE)
     log = tmp_path / "order.txt"
     step = "import sys, time\nopen(sys.argv[1], 'a').write(sys.argv[2])\nt = time.process_time()\n" \
            "while time.process_time() - t < float(sys.argv[3]):\n    pass\nsys.exit(int(sys.argv[4]))\n"
-    commands = {"a": ([sys.executable, "-c", step, str(log), "a", "0.0", "0"], dict(os.environ)),
-                "b": ([sys.executable, "-c", step, str(log), "b", "0.3", "3"], dict(os.environ))}
+    commands = {"a": ([sys.executable, "-c", step, str(log), "a", "0.0", "0"], source_tree(".")),
+                "b": ([sys.executable, "-c", step, str(log), "b", "0.3", "3"], source_tree("."))}
     res = _paired(commands, 2)
     assert log.read_text() == "abab"  # baseline first in every pair
     assert res["b"][2] == [3, 3] and res["a"][2] == [0, 0]
@@ -47,3 +46,24 @@ def test_paired_runs_alternate_and_count_each_commands_cpu(tmp_path):
     (tmp_path / "probreg").mkdir()
     (tmp_path / "probreg" / "__init__.py").write_text("")
     assert source_tree(tmp_path) == tmp_path.resolve()
+
+
+def test_paired_runs_import_the_trees_they_are_given_wherever_the_bench_runs(tmp_path, monkeypatch):
+    """``bench speed --baseline``: each side imports ``probreg`` from its own tree, also when the bench
+    is started from inside another checkout (``python -m`` and ``-c`` put the working folder first on
+    the path: the baseline ran the working folder's code, and the comparison measured a tree
+    against itself)."""
+    from probreg.bench.speed import _paired, source_tree
+
+    def tree(name):
+        (tmp_path / name / "probreg").mkdir(parents=True)
+        (tmp_path / name / "probreg" / "__init__.py").write_text(f"NAME = {name!r}\n")
+        return source_tree(tmp_path / name)
+
+    baseline, here, elsewhere = tree("baseline"), tree("here"), tree("elsewhere")
+    monkeypatch.chdir(elsewhere)  # the bench started from a third checkout
+    log = tmp_path / "imported.txt"
+    said = ("import sys, probreg\nopen(sys.argv[1], 'a').write(probreg.NAME + ' ')\n")
+    _paired({"baseline": ([sys.executable, "-c", said, str(log)], baseline),
+             "this tree": ([sys.executable, "-c", said, str(log)], here)}, 2)
+    assert log.read_text().split() == ["baseline", "here", "baseline", "here"]
