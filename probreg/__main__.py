@@ -40,8 +40,9 @@ def one_blas_thread(command):
     a runtime limit (:func:`probreg.pipeline.run_clip` sets one too), makes every forked worker
     dearer.  Read when OpenBLAS loads, so set before NumPy is imported; only in the ``probreg``
     script's own process (:func:`entry`), never on ``import probreg``.  On the benchmark suite's
-    ``run_a`` (two cores, interleaved runs from a shell): about 0.4 s less wall time and 1 s
-    less CPU than without (docs/method.md, "One BLAS thread").
+    ``run_a`` (two cores, 4 runs interleaved with the version before, ``bench speed --baseline``)
+    this and two smaller changes gave 0.55 s less wall time and 1.3 s less CPU (docs/method.md,
+    "One BLAS thread").
     """
     if (command not in FAST_EXIT_COMMANDS or "numpy" in sys.modules
             or any(k in os.environ for k in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS"))):

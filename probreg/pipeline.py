@@ -45,7 +45,7 @@ from .inference.sampling import SamplerSettings
 from .inference.evidence import BRANCHES, BranchChoice, laplace_log_evidence
 from .inference.verdict import (bone_length_cv, clip_verdict, knee_band_width, knee_flexion_peak, limb_image_length,
                                 view_obliquity)
-from .inference.parallel import default_workers, fork_call, warm_imports
+from .inference.parallel import default_workers, fork_call, in_background, warm_imports
 from .inference.time_base import time_base_check
 from .inference.gait_check import with_time_base
 from .io.clip import (FPS_RANGE, MIN_ATHLETE_FRAMES, MIN_ATHLETE_JOINTS, ClipFormatError, athlete_frames, load_clip,
@@ -367,7 +367,8 @@ def run_clip(clip_dir, out_dir, options: RunOptions = RunOptions(), log=print, p
 
 def _run_clip(clip_dir, out_dir, options, log, protect, extra_files):
     t0 = time.perf_counter()
-    if options.lens not in ("infer", "none"):  # options that cannot work are refused before any work
+    # options that cannot work are refused before any work
+    if options.lens not in ("infer", "none"):
         raise ValueError(f"lens must be 'infer' or 'none', got {options.lens!r}")
     if options.branch not in (*BRANCHES, "auto"):
         raise ValueError(f"branch must be auto, narrow or wide, got {options.branch!r}")
@@ -481,10 +482,11 @@ def _run_clip(clip_dir, out_dir, options, log, protect, extra_files):
                        frame_status=status, lens=lens_doc, band_decomposition=decomposition,
                        branch=branch, athlete=athlete, band_noise_ratio=ratio, gait_verdict_reasons=tuple(gait_reasons),
                        time_base=time_base)
-    with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=inputs, log=log) as tmp:
+    # posterior.nc (xarray, ~0.5 s) is written on the other core, and has ended before the folder is kept or removed
+    with atomic_output_dir(out_dir, overwrite=options.overwrite, inputs=inputs, log=log) as tmp, \
+            in_background(lambda: idata.to_netcdf(str(tmp / "posterior.nc"))):
         if options.report:  # most figures render on the other core while the files are written here
             figures = fork_call(lambda: render_figures(clip, result, REPORT_FIGURES_ELSEWHERE))
-        netcdf = fork_call(lambda: idata.to_netcdf(str(tmp / "posterior.nc")))  # xarray's ~1 s: the other core
         _copy_extra(tmp, extra_files)
         bands = [{k: v[i] for k, v in summ.items()} for i in range(3)]  # median, lo, hi per angle
         write_angles_csv(tmp / "angles.csv", clip.fps, *bands)
@@ -512,7 +514,6 @@ def _run_clip(clip_dir, out_dir, options, log, protect, extra_files):
                                      "priors": options.priors.describe()})
         if options.report:  # a failure in a process draws its figures again here, and raises as itself
             run_report(tmp / "report.html", clip, result, joints_med, cam_list, rendered={**early(), **figures()})
-        netcdf()
     if gait_reasons:
         log(f"warning: gait numbers from the contacts unreliable ({'; '.join(gait_reasons)}): see gait.json's status")
     log(f"height {height['median']:.2f} m [{height['lo']:.2f}, {height['hi']:.2f}]; "
@@ -567,6 +568,7 @@ def run_source(source, out_dir, options: RunOptions = RunOptions(), model=None, 
     import tempfile
 
     from .io.clip import write_keypoints_json
+
     if fps is not None and not FPS_RANGE[0] <= float(fps) <= FPS_RANGE[1]:  # NaN fails too
         raise ValueError(f"--fps must be a frame rate between {FPS_RANGE[0]:g} and {FPS_RANGE[1]:g}, got {fps}")
     source = Path(source)

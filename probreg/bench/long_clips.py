@@ -40,6 +40,10 @@ LONG_FRAMES = 1000
 CUT_FRAMES = 250
 
 
+#: ``clip.json``'s generator name of the clips this bench writes (a clip found there is reused only with it)
+GENERATOR = "probreg.bench.long_clips"
+
+
 def write_long_clip(root, seed, n_frames=LONG_FRAMES, jobs=None):
     """The default generator's clip at ``seed`` with ``n_frames`` frames in ``root/long_<seed>``
     (:func:`probreg.sim.replays.write_generated_clip`: written atomically, a clip this bench wrote
@@ -49,10 +53,6 @@ def write_long_clip(root, seed, n_frames=LONG_FRAMES, jobs=None):
 
     cfg = config_from_preset("default", int(seed), n_frames=int(n_frames))
     return write_generated_clip(Path(root) / f"long_{seed}", cfg, seed, GENERATOR, {}, "default", jobs=jobs)
-
-
-#: ``clip.json``'s generator name of the clips this bench writes (a clip found there is reused only with it)
-GENERATOR = "probreg.bench.long_clips"
 
 
 def cut_clip(src, dst, n_frames):

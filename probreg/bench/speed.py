@@ -72,12 +72,12 @@ def tree_env(tree, base=None):
     return env
 
 
-def _wall(cmd, cpu=None, env=None, tree=HERE):
+def _wall(cmd, cpu=None, tree=HERE):
     """Wall time and exit code of ``cmd`` run with the ``probreg`` of source tree ``tree`` (default
-    this bench's own; :func:`tree_env` on top of ``env``, default this environment), from a neutral
-    working folder; its CPU seconds (all its processes) go to ``cpu``."""
+    this bench's own; :func:`tree_env`), from a neutral working folder; its CPU seconds (all its
+    processes) go to ``cpu``."""
     c0, t0 = _children_cpu(), time.perf_counter()
-    proc = subprocess.run(cmd, capture_output=True, text=True, env=tree_env(tree, env), cwd=tempfile.gettempdir())
+    proc = subprocess.run(cmd, capture_output=True, text=True, env=tree_env(tree), cwd=tempfile.gettempdir())
     wall = time.perf_counter() - t0
     if cpu is not None:
         cpu.append(_children_cpu() - c0)

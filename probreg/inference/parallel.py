@@ -9,9 +9,10 @@ with one BLAS thread each (they already use every core).
 
 from __future__ import annotations
 
+import contextlib
 import os
 
-__all__ = ["default_workers", "fork_map", "fork_call", "stop_flag", "warm_imports"]
+__all__ = ["default_workers", "fork_map", "fork_call", "in_background", "stop_flag", "warm_imports"]
 
 #: the function forked workers run on their chunk (set only while a pool runs)
 _FORKED = None
@@ -129,6 +130,30 @@ def fork_call(work):
         return value if status == "ok" else work()
 
     return result
+
+
+@contextlib.contextmanager
+def in_background(work):
+    """``work()`` on a forked process (:func:`fork_call`) while the ``with`` block runs, waited for
+    when the block ends, also when it raises: work that writes into a folder the block's failure
+    removes (an unfinished result folder) has ended before the folder goes.  A failure of ``work``
+    raises after a block that succeeded; after a failing block, the block's error is the one raised.
+
+    >>> import tempfile
+    >>> with tempfile.TemporaryDirectory() as d:
+    ...     with in_background(lambda: open(f"{d}/a.txt", "w").write("from the fork")):
+    ...         _ = open(f"{d}/b.txt", "w").write("here")
+    ...     print(open(f"{d}/a.txt").read())
+    from the fork
+    """
+    result = fork_call(work)
+    try:
+        yield
+    except BaseException:
+        with contextlib.suppress(Exception):
+            result()
+        raise
+    result()
 
 
 def stop_flag():

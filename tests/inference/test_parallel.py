@@ -41,3 +41,25 @@ def test_fork_map_keeps_the_order_of_the_chunks(monkeypatch):
     done = []
     fork_map(sum, chunks, workers=1, done=done.append)
     assert done == chunks
+
+
+def test_background_work_has_ended_when_its_block_ends_even_by_an_error(tmp_path):
+    """``in_background``: the work (here writing a file after a pause) has ended when the block is left,
+    whether the block ends normally or raises; the block's own error is the one that propagates."""
+    import time
+
+    from probreg.inference.parallel import in_background
+
+    def slow_write(name):
+        def work():
+            time.sleep(0.3)
+            (tmp_path / name).write_text("done")
+        return work
+
+    with in_background(slow_write("ok.txt")):
+        pass
+    assert (tmp_path / "ok.txt").read_text() == "done"
+    with pytest.raises(KeyError, match="the block's"):
+        with in_background(slow_write("after_error.txt")):
+            raise KeyError("the block's")
+    assert (tmp_path / "after_error.txt").read_text() == "done"
