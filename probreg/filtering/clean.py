@@ -8,9 +8,9 @@ import numpy as np
 from .basic import (
     NOISE_FLOOR_LEG_FRAC,
     NOISE_FLOOR_PX,
-    butterworth,
+    butterworth_columns,
     fill_gaps,
-    hampel,
+    hampel_columns,
     keypoints_noisy,
     noise_model,
 )
@@ -64,21 +64,22 @@ def clean_keypoints(keypoints_px, fps, cutoff_hz="auto", half_window=4, n_sigma=
     sm = periodic_smooth(kp, fps, fill_max_gap=max_gap) if periodic else None
     done = (np.all(np.isfinite(kp[..., :2]), -1).sum(0) >= len(kp) // 2 if sm is not None  # joints it took
             else np.zeros(kp.shape[1], bool))
-    for j in range(kp.shape[1]):
-        cols = []
+    F, nj = kp.shape[:2]
+    xy = hampel_columns(kp[..., :2].reshape(F, -1), half_window, n_sigma, min_scale=scale).reshape(F, nj, 2) \
+        if noisy else kp[..., :2].copy()
+    # an outlier in x or y removes the joint
+    xy[~np.all(np.isfinite(xy), -1)] = np.nan
+    for j in range(nj):
         for c in range(2):
-            x = hampel(kp[:, j, c], half_window, n_sigma, min_scale=scale) if noisy else kp[:, j, c]
-            cols.append(x)
-        # an outlier in x or y removes the joint
-        bad = ~np.isfinite(cols[0]) | ~np.isfinite(cols[1])
-        for c in range(2):
-            x = fill_gaps(np.where(bad, np.nan, cols[c]), max_gap)
-            # the smoother's joints take its fit (the low-pass would be overwritten; its NaNs are
-            # those of ``x``, which is all the score bookkeeping below needs)
-            out[:, j, c] = butterworth(x, fps, cutoff_hz) if cutoff_hz and not done[j] else x
-        filled = np.isfinite(out[:, j, 0]) & ~np.isfinite(kp[:, j, 2])
-        out[filled, j, 2] = 0.5
-        out[~np.isfinite(out[:, j, 0]), j] = np.nan
+            xy[:, j, c] = fill_gaps(xy[:, j, c], max_gap)
+    # the smoother's joints take its fit (the low-pass would be overwritten; their NaNs are
+    # those of the filled series, which is all the score bookkeeping below needs)
+    low = np.flatnonzero(~done) if cutoff_hz else []
+    if len(low):
+        xy[:, low] = butterworth_columns(xy[:, low].reshape(F, -1), fps, cutoff_hz).reshape(F, len(low), 2)
+    out[..., :2] = xy
+    out[np.isfinite(xy[..., 0]) & ~np.isfinite(kp[..., 2]), 2] = 0.5
+    out[~np.isfinite(xy[..., 0])] = np.nan
     if sm is not None:  # else: clip without repeating strides (or not noisy), keep the low-pass
         use = done[None, :] & np.all(np.isfinite(sm[..., :2]), -1)
         out[..., :2] = np.where(use[..., None], sm[..., :2], out[..., :2])

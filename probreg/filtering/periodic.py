@@ -15,7 +15,7 @@ import numpy as np
 from scipy.ndimage import median_filter
 
 from .banded import SeriesSystem, lower_band
-from .basic import _lowpass_series, butterworth, fill_gaps, hampel, noise_model
+from .basic import _lowpass_series, butterworth, butterworth_columns, fill_gaps, hampel_columns, noise_model
 
 __all__ = ["periodic_smooth", "periodic_smooth_series", "score_noise_scale", "stride_lags", "stride_period_frames",
            "pattern_mismatch"]
@@ -65,13 +65,11 @@ def _common_mode(xy, ok, fps, noise, trunk, offset_hz=3.0, k=4.0):
     # joint is missing, then against the common reference of the first pass
     for _ in range(2):
         dev = np.where(okT[..., None], T - ref[:, None], np.nan)
-        off = np.empty_like(dev)
-        for j in range(dev.shape[1]):
-            for c in range(2):
-                x = fill_gaps(hampel(dev[:, j, c], 4, 3.0, min_scale=scale), F)
-                if not np.isfinite(x).any():
-                    x = np.zeros(F)
-                off[:, j, c] = butterworth(np.where(np.isfinite(x), x, np.nanmedian(x)), fps, offset_hz)
+        cols = hampel_columns(dev.reshape(F, -1), 4, 3.0, min_scale=scale)
+        for k in range(cols.shape[1]):  # gaps filled; a column never seen is 0
+            x = fill_gaps(cols[:, k], F)
+            cols[:, k] = np.where(np.isfinite(x), x, np.nanmedian(x)) if np.isfinite(x).any() else 0.0
+        off = butterworth_columns(cols, fps, offset_hz).reshape(dev.shape)
         est = np.where(okT[..., None], T - off, np.nan)  # (F, 7, 2): each joint's view of the common point
         with warnings.catch_warnings():
             warnings.simplefilter("ignore", RuntimeWarning)  # frames without any trunk joint
@@ -115,8 +113,7 @@ def _relative_tracks(kp, fps, noise):
     # the stride timing comes from outlier-free tracks (one wild detection would otherwise
     # dominate the pattern match)
     sn_med = float(np.median(noise / scale)) if np.isfinite(noise) else 0.0
-    rel_t = np.stack([[hampel(rel[:, j, c], 4, 3.0, min_scale=max(2 * sn_med, 1e-3)) for c in range(2)]
-                      for j in range(kp.shape[1])]).transpose(2, 0, 1)
+    rel_t = hampel_columns(rel.reshape(F, -1), 4, 3.0, min_scale=max(2 * sn_med, 1e-3)).reshape(rel.shape)
     return rel, ref, scale, rel_t
 
 
@@ -610,13 +607,15 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
         gap = ~ok[:, j]
         short_gap[:, j] = gap & np.isfinite(fill_gaps(np.where(gap, np.nan, 0.0), fill_max_gap))
     fits = {}
+    # speed (relative units per frame) from a light low-pass, for the timing term: every joint's
+    # low-pass in one pass
+    lows = _lowpass_series(np.where(ok[..., None], rel, np.nan), fps, 8.0)
     for j in range(17):
         y = rel[:, j]
         okj = ok[:, j]
         if okj.sum() < F // 2:
             continue
-        # speed (relative units per frame) from a light low-pass, for the timing term
-        yl = _lowpass_series(np.where(okj[:, None], y, np.nan), fps, 8.0)
+        yl = lows[:, j]
         yl = np.column_stack([np.interp(t, t[okj], yl[okj, c]) for c in range(2)])
         vel = np.linalg.norm(np.gradient(yl, axis=0), axis=-1)
         # the joint's stride-to-stride variability from its repeat differences
