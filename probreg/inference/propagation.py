@@ -11,7 +11,7 @@ import numpy as np
 from ..analysis import gait_summary
 from ..filtering import clean_keypoints, score_noise_scale, stride_lags
 from ..geometry import ANGLE_NAMES, JOINT_INDEX, CameraArrays
-from ..lifting import LiftConfig, fit_ground_track, lift
+from ..lifting import LiftConfig, fit_ground_track, lift_many
 from ..lifting.trajectory import camera_track_config
 from .parallel import default_workers, fork_call, fork_map, stop_flag
 
@@ -251,9 +251,12 @@ class DrawPropagation:
         return out
 
     def _propagate_draws(self, indices, draws, L, seeds, K, noise_copies, noise_seeds, cfg, with_noise, per_joint):
-        """The liftings of some draws: {draw index: {joints, joints_point, angles, angles_point, gait}}."""
-        out = {}
+        """The liftings of some draws: {draw index: {joints, joints_point, angles, angles_point, gait}}.
+
+        Every draw's liftings (the point one and, with noise, the bootstrap one) are set up first
+        (cameras, limb lengths, ground track) and then cast together (:func:`probreg.lifting.lift_many`)."""
         copies = {}  # noise copy index -> cleaned re-noised keypoints
+        jobs, meta = [], []  # one lifting each: (draw, suffix, cameras, track config, keypoints)
         for s in indices:
             rng = np.random.default_rng(int(seeds[s]))
             h = float(np.exp(draws[s, 0]))
@@ -271,31 +274,34 @@ class DrawPropagation:
                     copies[k] = (given if given is not None
                                  else self._noise_copy(np.random.default_rng(int(noise_seeds[k])), per_joint))
                 variants.append(("", copies[k]))
-            res_s = {}
             # the ground-track filter's contact noise as the likelihood has it for this camera
             # (the keypoint noise cast onto the ground: large across the track in a grazing view)
             tcfg = camera_track_config(cams, self.kp[:, JOINT_INDEX["pelvis"], :2], self.noise_sd)
             for suffix, kp in variants:
                 # the same contacts for every draw (detected once on the cleaned keypoints)
                 tr = fit_ground_track(cams, kp, self.fps, contacts=self.contacts, config=tcfg)
-                res = lift(cams, kp, self.fps, segments_m=seg, track=tr, config=cfg, stride_lag=self.stride_lag)
-                a = res.angles_deg()
-                res_s["joints" + suffix] = res.joints_track_m.astype(np.float32)
-                res_s["angles" + suffix] = a
-                # the cross-stride smoother's estimate of each angle's noise (deg): the data's and
-                # the bootstrap's are compared by probreg.inference.bands.bootstrap_noise_ratio
-                res_s["angle_noise" + suffix] = {k: float(v[0]) for k, v in res.extra.get("angle_noise", {}).items()}
-                if suffix == "_point":
-                    res_s["gait_point"] = dict(gait_summary(res.track, a, self.fps))
-                else:
-                    # the timing of the steps comes from the contacts: in the bootstrap they are
-                    # detected anew on the re-noised keypoints, so cadence and contact times vary
-                    res_s["gait"] = dict(gait_summary(fit_ground_track(cams, kp, self.fps, config=tcfg), a, self.fps))
-            if not with_noise:
+                jobs.append((cams, kp, seg, tr))
+                meta.append((s, suffix, cams, tcfg, kp))
+        out = {s: {} for s in indices}
+        for (s, suffix, cams, tcfg, kp), res in zip(meta, lift_many(jobs, self.fps, cfg, self.stride_lag)):
+            res_s = out[s]
+            a = res.angles_deg()
+            res_s["joints" + suffix] = res.joints_track_m.astype(np.float32)
+            res_s["angles" + suffix] = a
+            # the cross-stride smoother's estimate of each angle's noise (deg): the data's and
+            # the bootstrap's are compared by probreg.inference.bands.bootstrap_noise_ratio
+            res_s["angle_noise" + suffix] = {k: float(v[0]) for k, v in res.extra.get("angle_noise", {}).items()}
+            if suffix == "_point":
+                res_s["gait_point"] = dict(gait_summary(res.track, a, self.fps))
+            else:
+                # the timing of the steps comes from the contacts: in the bootstrap they are
+                # detected anew on the re-noised keypoints, so cadence and contact times vary
+                res_s["gait"] = dict(gait_summary(fit_ground_track(cams, kp, self.fps, config=tcfg), a, self.fps))
+        if not with_noise:
+            for res_s in out.values():
                 res_s["joints"], res_s["angles"] = res_s["joints_point"], res_s["angles_point"]
                 res_s["angle_noise"] = res_s["angle_noise_point"]
                 res_s["gait"] = res_s["gait_point"]
-            out[s] = res_s
         return out
 
     def _noise_copy(self, rng, per_joint):

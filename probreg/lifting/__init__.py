@@ -12,6 +12,7 @@ from .raycast import (
     estimate_segments,
     implausible_segments,
     lift,
+    lift_many,
     smooth_angles_across_strides,
 )
 from .trajectory import (
@@ -27,7 +28,8 @@ from .trajectory import (
 )
 
 __all__ = [
-    "LiftConfig", "LiftResult", "estimate_segments", "implausible_segments", "lift", "smooth_angles_across_strides",
+    "LiftConfig", "LiftResult", "estimate_segments", "implausible_segments", "lift", "lift_many",
+    "smooth_angles_across_strides",
     "ANTHROPOMETRIC_RATIOS", "GroundTrack", "TrackConfig", "camera_track_config", "cast_ankles", "detect_contacts",
     "fit_ground_track", "sagittal_ankle_points", "sagittal_ankle_height",
     "gate_contacts_by_height",

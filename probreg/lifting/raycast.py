@@ -28,8 +28,6 @@ from ..filtering import (
     clean_keypoints,
     keypoints_noisy,
     noise_model,
-    periodic_smooth_pair,
-    periodic_smooth_series,
     stride_lags,
 )
 from ..geometry import (
@@ -40,9 +38,10 @@ from ..geometry import (
     joint_angles,
     pixel_rays,
 )
+from .angles import smooth_angles_across_strides
 from .trajectory import GroundTrack, fit_ground_track
 
-__all__ = ["LiftConfig", "LiftResult", "estimate_segments", "implausible_segments", "lift",
+__all__ = ["LiftConfig", "LiftResult", "estimate_segments", "implausible_segments", "lift", "lift_many",
            "smooth_angles_across_strides", "ANTHROPOMETRIC_RATIOS"]
 
 
@@ -295,99 +294,6 @@ def _viterbi(emission, transition):
     return np.moveaxis(flat_path.reshape(path.shape), 0, -1)
 
 
-def _rotate(v, axis, angle):
-    """Rodrigues rotation of vectors v (F, 3) about unit axes (F, 3) by angles (F,) (radians)."""
-    c, s = np.cos(angle)[:, None], np.sin(angle)[:, None]
-    return v * c + np.cross(axis, v) * s + axis * np.sum(axis * v, -1, keepdims=True) * (1 - c)
-
-
-def _unit_or(v, fallback):
-    n = np.linalg.norm(v, axis=-1, keepdims=True)
-    return np.where(n > 1e-9, v / np.maximum(n, 1e-12), fallback)
-
-
-def smooth_angles_across_strides(joints_track_m, forward, lag, fps, rho=0.0, smooth_cutoff_hz=14.0, pair_min_sd=2.0):
-    """Cross-stride smoothing of the hip, knee and elbow angles of a lifted clip.
-
-    Detector noise reaches each lifted angle as a series of its own, new in every
-    stride, while the running pattern repeats with small stride-to-stride changes.
-    The left and right series of each hip, knee and elbow angle are smoothed together
-    with :func:`probreg.filtering.periodic_smooth_pair` (each side tied to itself one
-    stride later and to the other side half a stride later; noise level, stride
-    variability and asymmetry estimated from the series), and the joints are moved
-    rigidly so that the skeleton has exactly the smoothed angles: the whole leg
-    turns about the hip in the sagittal plane (hip angle), the shank about the
-    knee and the forearm about the elbow in the limb's own plane (flexion).
-    Segment lengths are unchanged.
-
-    Parameters
-    ----------
-    joints_track_m : ndarray (F, 17, 3)
-    forward : ndarray (F, 3)
-        Running direction per frame (as for :func:`probreg.geometry.skeleton.joint_angles`).
-    lag : ndarray (F,)
-        Stride lag per frame (:func:`probreg.filtering.stride_lags`).
-    fps : float
-    rho : float
-        Lag-1 correlation of the angle noise.
-    pair_min_sd : float or None
-        Left and right sides of each angle are smoothed together, tied half a stride apart
-        (:func:`probreg.filtering.periodic_smooth_pair`), with their asymmetry sd floored at
-        this value (degrees); None smooths each side alone.
-
-    Returns
-    -------
-    joints : ndarray (F, 17, 3)
-    info : dict
-        Per angle ``(noise_sd, stride_sd)`` in degrees as estimated by the smoother.
-    """
-    j = np.array(joints_track_m, float)
-    f = np.asarray(forward, float)
-    left = np.column_stack([-f[:, 1], f[:, 0], np.zeros(len(f))])
-    # the moves below are rigid and each leaves the other angles as they are (the turn about
-    # the hip keeps the knee's flexion), so the angles are measured once
-    angles = joint_angles(j, forward=f)
-    info = {}
-    fits = {}
-    for base in ("hip", "knee", "elbow"):
-        yl, yr = angles[f"{base}_l"], angles[f"{base}_r"]
-        if pair_min_sd is None:
-            for name, y in ((f"{base}_l", yl), (f"{base}_r", yr)):
-                x, inf = periodic_smooth_series(y, lag, fps, rho=rho, smooth_cutoff_hz=smooth_cutoff_hz)
-                fits[name], info[name] = x, (inf["noise_sd"], inf["stride_sd"])
-            continue
-        (xl, xr), inf = periodic_smooth_pair(yl, yr, lag, fps, rho=rho, smooth_cutoff_hz=smooth_cutoff_hz,
-                                            min_asym=pair_min_sd)
-        for k, (name, x) in enumerate(((f"{base}_l", xl), (f"{base}_r", xr))):
-            fits[name], info[name] = x, (inf["noise_sd"][k], inf["stride_sd"][k])
-
-    def smoothed(name):
-        x = fits[name]
-        d = np.radians(x - angles[name])
-        return np.where(np.isfinite(d), d, 0.0), x
-
-    for side in ("l", "r"):
-        hip, knee, ankle = (J[f"{side}_{n}"] for n in ("hip", "knee", "ankle"))
-        # hip angle: the leg turns about the hip; turning by -d about ``left`` raises the
-        # thigh's angle atan2(v.f, -v.z) by d
-        d, _ = smoothed(f"hip_{side}")
-        for k in (knee, ankle):
-            j[:, k] = j[:, hip] + _rotate(j[:, k] - j[:, hip], left, -d)
-        # knee flexion (the angle between thigh and shank directions): the shank turns away
-        # from the thigh's direction in their common plane
-        for (a, b, c), name, default in (((hip, knee, ankle), f"knee_{side}", left),
-                                         ((J[f"{side}_shoulder"], J[f"{side}_elbow"], J[f"{side}_wrist"]),
-                                          f"elbow_{side}", -left)):
-            d, x = smoothed(name)
-            u = j[:, b] - j[:, a]
-            v = j[:, c] - j[:, b]
-            axis = _unit_or(np.cross(u, v), default)
-            # flexion is unsigned: a target below zero stays at a straight limb
-            d = np.where(np.isfinite(x) & (x < 0), d - np.radians(x), d)
-            j[:, c] = j[:, b] + _rotate(v, axis, d)
-    return j, info
-
-
 #: the segment lengths the lifting uses (its spheres' radii)
 LIFTED_SEGMENTS = ("hip_width", "shoulder_width", "thigh", "shank", "upper_arm", "forearm")
 
@@ -474,6 +380,51 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
         If the keypoints do not have shape (F, 17, 2|3) or the camera count differs, or a given
         segment length is unknown, not positive or not a number.
     """
+    return lift_many([(cameras, keypoints_px, segments_m, track)], fps, config, stride_lag)[0]
+
+
+#: frames x liftings cast in one batch by :func:`lift_many` (bounds its memory: about 1 kB a row)
+BATCH_ROWS = 20000
+
+
+def lift_many(jobs, fps=50.0, config: LiftConfig = LiftConfig(), stride_lag=None):
+    """:func:`lift` of several liftings at once, each exactly as :func:`lift` gives it.
+
+    ``jobs``: a sequence of ``(cameras, keypoints_px, segments_m, track)``, one per lifting (e.g.
+    the posterior draws of a clip, each with its own cameras, limb lengths, keypoints and ground
+    track); ``fps``, ``config`` and ``stride_lag`` are shared.  Returns their :class:`LiftResult`
+    in order.
+
+    The ray casting, the limb chains' candidates and the Viterbi recursion run over all liftings
+    of one length at once: the frames of every lifting are rows of one array, and the recursion's
+    loop over frames runs once for all of them instead of once per lifting (a clip's posterior
+    draws: ``reports/bench_speed.md``).  Each lifting's keypoint cleaning, segment estimate, ground
+    track and cross-stride angle smoothing remain its own.
+
+    >>> from probreg.geometry import Camera
+    >>> cam = Camera.look_at([0.0, -30.0, 5.0], [0.0, 0.0, 1.0], fov_deg=20.0)
+    >>> kp = np.full((3, 17, 3), np.nan)
+    >>> [r.status for r in lift_many([([cam] * 3, kp, None, None)] * 2)]
+    [['no_detection', 'no_detection', 'no_detection'], ['no_detection', 'no_detection', 'no_detection']]
+    """
+    preps = [_prepare(cams, kp, fps, seg, track, config) for cams, kp, seg, track in jobs]
+    cast = [None] * len(preps)
+    by_length = {}
+    for i, p in enumerate(preps):
+        by_length.setdefault(p["F"], []).append(i)
+    for F, idx in by_length.items():
+        step = max(1, BATCH_ROWS // max(F, 1))
+        for a in range(0, len(idx), step):
+            part = idx[a:a + step]
+            joints, miss = _cast([preps[i] for i in part], fps, config)
+            for k, i in enumerate(part):
+                cast[i] = (joints[k].copy(), miss[k].copy())
+    return [_finish(p, joints, miss, fps, config, stride_lag) for p, (joints, miss) in zip(preps, cast)]
+
+
+def _prepare(cameras, keypoints_px, fps, segments_m, track, config):
+    """One lifting's inputs checked and made ready for :func:`_cast` (keypoints cleaned as the
+    config says, cameras as arrays, the ground track, segment lengths, rays)."""
     kp = np.array(keypoints_px, float)
     if kp.ndim != 3 or kp.shape[1] != 17 or kp.shape[2] not in (2, 3):
         raise ValueError(f"keypoints must have shape (F, 17, 3), got {kp.shape}")
@@ -498,13 +449,23 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
     seg = _given_segments(segments_m)
     if not set(LIFTED_SEGMENTS) <= set(seg):  # the lengths not given are estimated from the clip
         seg = {**estimate_segments(cams, kp, track, fps), **seg}
-    origins = cams.C
-    rays = pixel_rays(cams, kp[..., :2])  # (F, 17, 3), NaN where missing
-    left = track.left
-    fwd = track.forward
-    point = np.column_stack([track.position_m, np.zeros(F)])
-    joints = np.full((F, 17, 3), np.nan)
-    miss = np.full((F, 17), np.nan)
+    return {"F": F, "kp": kp, "raw_missing": raw_missing, "cross": cross, "cams": cams, "track": track,
+            "seg": seg, "rays": pixel_rays(cams, kp[..., :2]), "left": track.left, "fwd": track.forward}
+
+
+def _cast(preps, fps, config):
+    """The ray casting of liftings of one length ``F`` (from :func:`_prepare`), all at once:
+    joints (N, F, 17, 3) and sphere misfits (N, F, 17).  Every step is per frame except the
+    frame-to-frame costs and the Viterbi recursion, which run per lifting along its own frames."""
+    N, F = len(preps), preps[0]["F"]
+    origins = np.concatenate([p["cams"].C for p in preps])  # rows: lifting by lifting, frame by frame
+    rays = np.concatenate([p["rays"] for p in preps])  # (N F, 17, 3), NaN where missing
+    left = np.concatenate([p["left"] for p in preps])
+    fwd = np.concatenate([p["fwd"] for p in preps])
+    point = np.concatenate([np.column_stack([p["track"].position_m, np.zeros(F)]) for p in preps])
+    seg = {k: np.repeat(np.array([p["seg"][k] for p in preps], float), F) for k in LIFTED_SEGMENTS}
+    joints = np.full((N * F, 17, 3), np.nan)
+    miss = np.full((N * F, 17), np.nan)
     # mid-sagittal joints
     mids = [J[n] for n in ("pelvis", "spine", "thorax", "neck", "head")]
     joints[:, mids] = _plane_hits(origins, rays[:, mids], point, left)
@@ -516,7 +477,7 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
             sols, m = _sphere_hits(origins, rays[:, J[name]], c, seg[width] / 2)
             joints[:, J[name]] = _side_pick(sols, c, left, sign)
             miss[:, J[name]] = m
-    # limb chains: candidates, then Viterbi over the clip
+    # limb chains: candidates, then Viterbi over each lifting's frames
     lean = np.arctan2(np.sum((joints[:, J["thorax"]] - joints[:, J["pelvis"]]) * fwd, -1),
                       (joints[:, J["thorax"]] - joints[:, J["pelvis"]])[:, 2])
     pelvis = joints[:, J["pelvis"]]
@@ -533,11 +494,11 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
                                          config.length_std_m, lat_std, offsets=offs)
         u = cands[:, :, 0] - r[:, None]  # root -> mid
         v = cands[:, :, 1] - cands[:, :, 0]  # mid -> end
-        bend = np.sum(np.cross(u, v) * left[:, None], -1) / (seg[s1] * seg[s2])  # sin of signed flexion
+        bend = np.sum(np.cross(u, v) * left[:, None], -1) / (seg[s1] * seg[s2])[:, None]  # sin of signed flexion
         e = (cmiss / config.length_std_m) ** 2
         # limbs swing in the sagittal plane through their root: the mirror solution of a
         # ray-sphere pair lies across the body (the camera looks roughly along the plane normal)
-        lateral = np.sum((cands - r[:, None, None, :]) * left[:, None, None, :], -1)  # (F, 4, 2)
+        lateral = np.sum((cands - r[:, None, None, :]) * left[:, None, None, :], -1)  # (N F, 4, 2)
         if arm:  # the wrist from the elbow
             lateral = np.stack([lateral[..., 0],
                                 lateral[..., 1] - lateral[..., 0] - medial * config.forearm_medial_offset_m], -1)
@@ -553,32 +514,40 @@ def lift(cameras, keypoints_px, fps=50.0, segments_m=None, track: GroundTrack | 
         else:
             e += config.rom_penalty * (bend > config.elbow_flex_tol)  # elbows flex forward
         e = np.where(np.isfinite(e), e, 0.0)
-        rel = cands - pelvis[:, None, None, :]
-        d = rel[1:, None, :, :, :] - rel[:-1, :, None, :, :]  # (F-1, S', S, 2, 3)
+        rel = (cands - pelvis[:, None, None, :]).reshape(N, F, 4, 2, 3)
+        d = rel[:, 1:, None, :, :, :] - rel[:, :-1, :, None, :, :]  # (N, F-1, S', S, 2, 3)
         T = np.sum(d**2, axis=(-1, -2)) / (2 * sig**2)
         T = np.where(np.isfinite(T), T, 0.0)
-        pending.append((cands, e, T, r, mid, end, s1, s2))
-    paths = _viterbi(np.stack([p[1] for p in pending]), np.stack([p[2] for p in pending]))
+        pending.append((cands, e.reshape(N, F, 4), T, r, mid, end, s1, s2))
+    paths = _viterbi(np.stack([p[1] for p in pending]), np.stack([p[2] for p in pending]))  # (chains, N, F)
+    rows = np.arange(N * F)
     for (cands, _, _, r, mid, end, s1, s2), path in zip(pending, paths):
-        chosen = cands[np.arange(F), path]
+        chosen = cands[rows, path.reshape(-1)]
         joints[:, J[mid]] = chosen[:, 0]
         joints[:, J[end]] = chosen[:, 1]
         miss[:, J[mid]] = np.linalg.norm(chosen[:, 0] - r, axis=-1) - seg[s1]
         miss[:, J[end]] = np.linalg.norm(chosen[:, 1] - chosen[:, 0], axis=-1) - seg[s2]
     # a joint whose ray is missing stays missing (no candidate is invented)
-    missing = ~np.all(np.isfinite(rays), -1)
-    joints[missing] = np.nan
+    joints[~np.all(np.isfinite(rays), -1)] = np.nan
+    return joints.reshape(N, F, 17, 3), miss.reshape(N, F, 17)
+
+
+def _finish(p, joints, miss, fps, config, stride_lag):
+    """One lifting's result from its cast joints: the cross-stride angle smoothing (when the
+    config asks for it) and the per-frame status."""
+    F = p["F"]
     extra = {}
-    if cross:
-        lag = stride_lag if stride_lag is not None else stride_lags(kp, fps)
+    if p["cross"]:
+        lag = stride_lag if stride_lag is not None else stride_lags(p["kp"], fps)
         if lag is not None:
             joints, extra["angle_noise"] = smooth_angles_across_strides(
-                joints, fwd, lag, fps, rho=config.angle_noise_rho, smooth_cutoff_hz=config.angle_smooth_cutoff_hz,
+                joints, p["fwd"], lag, fps, rho=config.angle_noise_rho, smooth_cutoff_hz=config.angle_smooth_cutoff_hz,
                 pair_min_sd=config.left_right_min_sd_deg)
     # per-frame status, the first that applies (whole-array tests, then one pick per frame)
+    raw_missing, missing = p["raw_missing"], ~np.all(np.isfinite(p["rays"]), -1)
     all_raw = raw_missing.reshape(F, -1).all(1)
-    tests = [~cams.valid, all_raw & missing.reshape(F, -1).all(1), np.isnan(joints).reshape(F, -1).any(1), all_raw]
+    tests = [~p["cams"].valid, all_raw & missing.reshape(F, -1).all(1), np.isnan(joints).reshape(F, -1).any(1), all_raw]
     names = np.array(["no_camera", "no_detection", "partial", "interpolated", "ok"], object)
     status = names[np.argmax(np.column_stack(tests + [np.ones(F, bool)]), axis=1)].tolist()
-    return LiftResult(joints_track_m=joints, status=status, miss_m=miss, track=track, segments_m=seg,
+    return LiftResult(joints_track_m=joints, status=status, miss_m=miss, track=p["track"], segments_m=p["seg"],
                       extra=extra)

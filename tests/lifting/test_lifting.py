@@ -142,6 +142,38 @@ def test_lift_rejects_bad_shapes(exact):
         lift(gt.cameras[:5], j2, clip.fps)
 
 
+def test_lift_many_gives_each_lifting_exactly_as_lift_does(small_clip, monkeypatch):
+    """The batched casting (every lifting's frames as rows of one array, one Viterbi recursion for
+    all) must not change a single bit: liftings with their own cameras, limb lengths, keypoints and
+    tracks, two clip lengths, split into batches of bounded size."""
+    import probreg.lifting.raycast as raycast
+    from probreg.geometry import Camera
+
+    clip = load_clip(small_clip)
+    gt = load_groundtruth(small_clip)
+    seg = gt.athlete["segments_m"]
+    F = clip.n_frames
+    rng = np.random.default_rng(3)
+    jobs = []
+    for k in range(4):
+        cams = [Camera(K=c.K, R=c.R, C=c.C + [0.0, 0.0, 0.3 * k], dist=c.dist) for c in gt.cameras]
+        kp = clip.keypoints_px.copy()
+        kp[..., :2] += rng.normal(0, 0.5, kp[..., :2].shape)
+        n = F if k < 3 else F - 7  # a shorter clip is cast in its own batch
+        jobs.append((cams[:n], kp[:n], {s: v * (1 + 0.03 * k) for s, v in seg.items()},
+                     None if k == 1 else fit_ground_track(cams[:n], kp[:n], clip.fps)))
+    cfg = LiftConfig(smooth_cutoff_hz=None, cross_stride_angles=True)
+    single = [lift(c, kp, clip.fps, segments_m=s, track=t, config=cfg) for c, kp, s, t in jobs]
+    monkeypatch.setattr(raycast, "BATCH_ROWS", 2 * F)  # at most two liftings a batch
+    many = raycast.lift_many(jobs, clip.fps, cfg)
+    assert [len(r.status) for r in many] == [F, F, F, F - 7]
+    for a, b in zip(single, many):
+        assert np.array_equal(a.joints_track_m, b.joints_track_m, equal_nan=True)
+        assert np.array_equal(a.miss_m, b.miss_m, equal_nan=True)
+        assert a.status == b.status and a.segments_m == b.segments_m and a.extra.keys() == b.extra.keys()
+    assert not np.array_equal(many[0].joints_track_m, many[2].joints_track_m, equal_nan=True)  # they differ
+
+
 def test_noisy_lifting_beats_generic_camera(small_clip):
     clip = load_clip(small_clip)
     gt = load_groundtruth(small_clip)
