@@ -53,6 +53,7 @@ import warnings
 
 import numpy as np
 
+from ..calibration.family import members_on_grid
 from ..calibration.registration import (
     ClipRegistration,
     _zoom_outliers,
@@ -250,7 +251,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
                               [frames[j::k] for j in range(k)])
             members = {i: m for part in parts for i, m in part.items()}
         else:
-            members = {i: self._members(i, fams[i], fgrid) for i in frames}
+            members = members_on_grid({i: fams[i] for i in frames}, fgrid)
         for i in frames:
             fam = fams[i]
             m = members[i]
@@ -274,10 +275,8 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self._glitches = None
 
     def _members(self, i, fam, fgrid):
-        """Members of frame ``i``'s family at the focal lengths ``fgrid`` (lines undistorted
-        with each member's own focal length when the lens distortion is given)."""
-        if self.dist is None or not np.any(self.dist):
-            return fam.members(fgrid)
+        """Members of frame ``i``'s family at the focal lengths ``fgrid``, its lines undistorted
+        with each member's own focal length (the lens distortion is given)."""
         from ..calibration import undistorted_members
 
         lo, hi = self.priors.camera_height.interval(0.998)

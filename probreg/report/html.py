@@ -36,10 +36,20 @@ def _subplots(nrows=1, ncols=1, **kw):
     return fig, fig.subplots(nrows, ncols, **kw)
 
 
+def _laid_out(fig):
+    """``fig`` fitted by ``tight_layout`` and marked so: :func:`figure_png` then saves it as it is
+    (cropping it to a tight box as well would draw it twice, ~40 % of the saving's time)."""
+    fig.tight_layout()
+    fig._probreg_laid_out = True
+    return fig
+
+
 def figure_png(fig):
-    """A matplotlib figure as PNG bytes, as reports embed it (a pyplot figure is closed)."""
+    """A matplotlib figure as PNG bytes, as reports embed it (a pyplot figure is closed); cropped
+    to its content unless it was laid out already (:func:`_laid_out`)."""
     buf = io.BytesIO()
-    fig.savefig(buf, format="png", dpi=100, bbox_inches="tight")
+    fig.savefig(buf, format="png", dpi=100, **({} if getattr(fig, "_probreg_laid_out", False)
+                                              else {"bbox_inches": "tight"}))
     if fig.canvas.manager is not None:  # made by pyplot: release it
         import matplotlib.pyplot as plt
 
@@ -468,8 +478,7 @@ def gait_cycle_figure(curves):
         ax.set_xlabel("gait cycle (%)")
         ax.set_ylabel("deg")
         ax.legend(fontsize=8)
-    fig.tight_layout()
-    return fig
+    return _laid_out(fig)
 
 
 def prior_posterior_figure(priors, posterior):
@@ -493,8 +502,7 @@ def prior_posterior_figure(priors, posterior):
         ax.set_xlabel(label)
         ax.set_yticks([])
         ax.legend(fontsize=8)
-    fig.tight_layout()
-    return fig
+    return _laid_out(fig)
 
 
 #: colours of the status strip: ok, bridged (camera interpolated), no camera, another camera shot
@@ -572,8 +580,7 @@ def sampler_figure(idata, max_points=800):
         axes[row, 1].set_ylabel("walker")
         axes[row, 1].set_xlabel("rank among all draws (fraction)" if row == 1 else "")
     axes[1, 0].set_xlabel("step")
-    fig.tight_layout()
-    return fig
+    return _laid_out(fig)
 
 
 def time_base_sentence(tb):
@@ -615,5 +622,4 @@ def decomposition_figure(decomposition, angles=("knee_l", "knee_r", "hip_l", "hi
     ax.legend(loc="upper left", bbox_to_anchor=(1.0, 1.0), fontsize=8)
     if title:
         ax.set_title(title, fontsize=9)
-    fig.tight_layout()
-    return fig
+    return _laid_out(fig)
