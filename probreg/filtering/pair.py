@@ -25,7 +25,7 @@ from collections import OrderedDict
 
 import numpy as np
 
-from .banded import SeriesSystem, _band_add, band_inverse_diagonals
+from .banded import SeriesSystem, _band_add, _tie_rows, band_inverse_diagonals
 
 __all__ = ["PairSystem", "pair_system", "periodic_smooth_pair"]
 
@@ -52,16 +52,10 @@ class PairSystem:
         self.series = [SeriesSystem(ok, lag, rho, p2_scale) for ok in oks]
         F = self.F = self.series[0].F
         t = np.arange(F)
-        half = np.asarray(lag, float) / 2
-        has = np.isfinite(half) & (t + np.nan_to_num(half) + 1 < F)
-        pos = t[has] + half[has]
-        k = np.floor(pos).astype(int)
-        a = pos - k
-        one = np.ones(len(k))
+        cols, vals, has = _tie_rows(np.asarray(lag, float) / 2)  # ties half a stride on
         # rows l(t) - r(t + h) and r(t) - l(t + h), interleaved indices 2 t + side
-        self.pair_cols = np.concatenate([np.column_stack([2 * t[has], 2 * k + 1, 2 * k + 3]),
-                                         np.column_stack([2 * t[has] + 1, 2 * k, 2 * k + 2])])
-        self.pair_vals = np.tile(np.column_stack([one, -(1 - a), -a]), (2, 1))
+        self.pair_cols = np.concatenate([2 * cols + [0, 1, 1], 2 * cols + [1, 0, 0]])
+        self.pair_vals = np.tile(vals, (2, 1))
         # stride phase (radians) of every frame, for the systematic asymmetry's harmonics:
         # rows r(t) - l(t + h) read the asymmetry a(phase_t), rows l(t) - r(t + h) read
         # -a(phase_t + pi)
@@ -70,9 +64,9 @@ class PairSystem:
         step = 2 * np.pi / np.interp(t, t[fin], lag_f[fin]) if fin.any() else np.zeros(F)
         phase = np.concatenate([[0.0], np.cumsum(step)[:-1]])
         self.pair_phase = np.concatenate([phase[t[has]] + np.pi, phase[t[has]]])
-        self.pair_sign = np.repeat([-1.0, 1.0], len(k))
+        self.pair_sign = np.repeat([-1.0, 1.0], len(cols))
         width = [2 * S.u + 1 for S in self.series]
-        if len(k):
+        if len(cols):
             width.append(int(np.max(self.pair_cols[:, 2] - self.pair_cols[:, 0])))
         self.u = max(width)
         # each series' fixed band (noise precision and smoothness) in interleaved storage: series

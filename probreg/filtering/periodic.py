@@ -14,7 +14,7 @@ import warnings
 import numpy as np
 from scipy.ndimage import median_filter
 
-from .banded import SeriesSystem, lower_band
+from .banded import SeriesSystem, _band_matrix, _prior_band, _tie_rows, lower_band
 from .basic import _lowpass_series, butterworth, butterworth_columns, fill_gaps, hampel_columns, noise_model
 
 __all__ = ["periodic_smooth", "periodic_smooth_series", "score_noise_scale", "stride_lags", "stride_period_frames",
@@ -238,17 +238,9 @@ def _coupling(lag):
     with a partner one stride later; returns ``(R, has)``, ``has`` marking those frames."""
     from scipy import sparse
 
-    F = len(lag)
-    t = np.arange(F)
-    has = np.isfinite(lag) & (t + np.nan_to_num(lag) + 1 < F)
-    pos = t[has] + lag[has]
-    k = np.floor(pos).astype(int)
-    a = pos - k
-    m = int(has.sum())
-    rows = np.arange(m)
-    R = sparse.csr_matrix((np.concatenate([np.ones(m), -(1 - a), -a]),
-                           (np.concatenate([rows, rows, rows]), np.concatenate([t[has], k, k + 1]))),
-                          shape=(m, F))
+    cols, vals, has = _tie_rows(lag)
+    m = len(cols)
+    R = sparse.csr_matrix((vals.T.ravel(), (np.tile(np.arange(m), 3), cols.T.ravel())), shape=(m, len(lag)))
     return R, has
 
 
@@ -393,13 +385,13 @@ def periodic_smooth_series(y, lag, fps, rho=0.0, smooth_cutoff_hz=14.0, lag_sd_f
     return x, {"noise_sd": float(np.sqrt(sn2)), "stride_sd": float(np.sqrt(sv2))}
 
 
-def _robust_fit(y, okj, prior, Q, sn2, rs2, robust_iters, outlier_k, w=None):
+def _robust_fit(y, okj, pb, Q, sn2, rs2, robust_iters, outlier_k, w=None):
     """One joint's penalised least-squares fit (both coordinates) with IRLS outlier weights.
 
-    ``y`` (F, 2) relative track, ``prior`` the coupling + smoothness precision, ``Q`` the
-    AR(1) noise precision, ``sn2`` (F,) noise variance, ``rs2`` (F,) or None its relative
-    per-detection factor, ``w`` starting outlier weights.  Returns the fit (F, 2) and the
-    last weights."""
+    ``y`` (F, 2) relative track, ``pb`` the coupling + smoothness precision in lower band storage
+    (:func:`_prior_band`), ``Q`` the AR(1) noise precision, ``sn2`` (F,) noise variance, ``rs2``
+    (F,) or None its relative per-detection factor, ``w`` starting outlier weights.  Returns the
+    fit (F, 2) and the last weights."""
     from scipy.linalg import LinAlgError, cho_solve_banded, cholesky_banded
 
     y0 = np.where(okj[:, None], y, 0.0)
@@ -408,7 +400,6 @@ def _robust_fit(y, okj, prior, Q, sn2, rs2, robust_iters, outlier_k, w=None):
     # banded throughout: the prior (one stride wide) in band storage, the data term
     # tridiagonal (AR(1) noise precision); the same system as the sparse one, without its
     # per-call overhead
-    pb = lower_band(prior, min_band=1)
     qd, qo = Q.diagonal(), Q.diagonal(-1)
     for it in range(robust_iters + 1):
         # data term with the AR(1) noise precision (tridiagonal), missing frames left out
@@ -428,7 +419,7 @@ def _robust_fit(y, okj, prior, Q, sn2, rs2, robust_iters, outlier_k, w=None):
             from scipy import sparse
 
             W = sparse.diags(sq) @ Q @ sparse.diags(sq)
-            x = _SPDSolver(W + prior).solve(W @ y0)
+            x = _SPDSolver(W + _band_matrix(pb)).solve(W @ y0)
         if it == robust_iters:
             break
         # detector outliers and left/right swaps: redescending (Cauchy-type) weights on the
@@ -567,8 +558,6 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
         Joints detected in fewer than half the frames are NaN (not smoothed); the
         score channel is passed through.
     """
-    from scipy import sparse
-
     kp = np.asarray(keypoints_px, float)
     F, nj = kp.shape[:2]
     if nj != 17 or F < 20:
@@ -599,7 +588,8 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
     if ankle_cutoff_hz is not None:
         cut[[3, 6]] = ankle_cutoff_hz  # H36M r_ankle, l_ankle
     # smoothness relative to the mean data weight, one matrix per distinct cut-off
-    P2s = {c: _smoothness(F, fps, c).multiply(np.mean(1.0 / sn2_all)) for c in set(cut.tolist())}
+    P2s = {c: lower_band(_smoothness(F, fps, c).multiply(np.mean(1.0 / sn2_all))) for c in set(cut.tolist())}
+    tie_cols, tie_vals, _ = _tie_rows(lag)
     out = np.full_like(kp, np.nan)
     out[..., 2:] = kp[..., 2:]
     short_gap = np.zeros((F, 17), bool)
@@ -629,7 +619,7 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
             sv2 = float(np.mean(np.var(yi, axis=0)))
         sv2 = max(sv2, 0.05 * float(np.median(sn2_all)))
         cvar = 2 * sv2 + timing
-        prior = R.T @ sparse.diags(1.0 / cvar) @ R + P2s[float(cut[j])]
+        prior = _prior_band(tie_cols, tie_vals, cvar, P2s[float(cut[j])])
         rs2 = None if rel_sd is None else np.nan_to_num(np.asarray(rel_sd, float)[:, j], nan=1.0) ** 2
         x, w = _robust_fit(y, okj, prior, Q, sn2_all, rs2, robust_iters, outlier_k)
         fits[j] = (prior, w)
