@@ -12,6 +12,7 @@ from ..analysis import gait_summary
 from ..filtering import clean_keypoints, score_noise_scale, stride_lags
 from ..geometry import ANGLE_NAMES, JOINT_INDEX, CameraArrays
 from ..lifting import LiftConfig, fit_ground_track, lift_many
+from ..lifting.raycast import BATCH_ROWS
 from ..lifting.trajectory import camera_track_config
 from .parallel import default_workers, fork_call, fork_map, stop_flag
 
@@ -256,6 +257,17 @@ class DrawPropagation:
         Every draw's liftings (the point one and, with noise, the bootstrap one) are set up first
         (cameras, limb lengths, ground track) and then cast together (:func:`probreg.lifting.lift_many`)."""
         copies = {}  # noise copy index -> cleaned re-noised keypoints
+        out = {}
+        # draws in groups whose liftings fill one casting batch (memory as for one batch)
+        size = max(1, BATCH_ROWS // (2 * max(self.F, 1)))
+        for a in range(0, len(indices), size):
+            out.update(self._lift_group(indices[a:a + size], copies, draws, L, seeds, K, noise_copies, noise_seeds,
+                                        cfg, with_noise, per_joint))
+        return out
+
+    def _lift_group(self, indices, copies, draws, L, seeds, K, noise_copies, noise_seeds, cfg, with_noise, per_joint):
+        """:meth:`_propagate_draws` of a group of draws, their liftings cast together; ``copies``
+        (noise copy index -> keypoints) is the chunk's, filled here as copies are made."""
         jobs, meta = [], []  # one lifting each: (draw, suffix, cameras, track config, keypoints)
         for s in indices:
             rng = np.random.default_rng(int(seeds[s]))
