@@ -7,8 +7,10 @@ from .basic import (
     NOISE_FLOOR_LEG_FRAC,
     NOISE_FLOOR_PX,
     butterworth,
+    butterworth_columns,
     fill_gaps,
     hampel,
+    hampel_columns,
     keypoint_noise_px,
     keypoints_noisy,
     leg_length_px,
@@ -27,7 +29,7 @@ from .periodic import (
 )
 
 __all__ = [
-    "hampel", "fill_gaps", "butterworth", "clean_keypoints", "detection_status", "keypoint_noise_px", "noise_model",
+    "hampel", "hampel_columns", "fill_gaps", "butterworth", "butterworth_columns", "clean_keypoints", "detection_status", "keypoint_noise_px", "noise_model",
     "keypoints_noisy", "leg_length_px", "NOISE_FLOOR_PX", "NOISE_FLOOR_LEG_FRAC",
     "periodic_smooth", "periodic_smooth_pair", "periodic_smooth_series", "score_noise_scale", "stride_lags",
     "pattern_mismatch", "stride_period_frames", "relabel_left_right",

@@ -68,6 +68,65 @@ def test_lower_band_round_trip():
     assert np.allclose(back, A)
 
 
+@pytest.mark.parametrize("lags", ["varying", "none", "some missing"])
+def test_prior_band_is_the_sparse_prior_to_the_bit(lags):
+    """The keypoint smoother's per-joint prior assembled in band storage must be, bit for bit, the
+    band of the sparse ``R' diag(1/cvar) R + P2`` it replaced (the cleaning's results depend on it
+    to the last bit), for stride lags that vary, that are all missing or partly missing."""
+    from probreg.filtering.banded import _band_matrix, _prior_band, _tie_rows
+    from probreg.filtering.periodic import _coupling, _smoothness
+
+    rng = np.random.default_rng(3)
+    F = 200
+    lag = 20 + 3 * np.sin(np.arange(F) / 15) + rng.normal(0, 0.3, F)
+    if lags == "none":
+        lag[:] = np.nan
+    elif lags == "some missing":
+        lag[rng.random(F) < 0.2] = np.nan
+    cols, vals, has = _tie_rows(lag)
+    R, has_r = _coupling(lag)
+    assert np.array_equal(has, has_r) and len(cols) == R.shape[0] == has.sum()
+    cvar = rng.uniform(0.1, 3.0, len(cols))
+    P2 = _smoothness(F, 50.0, 7.0) * 3.7
+    ab = _prior_band(cols, vals, cvar, lower_band(P2))
+    assert np.array_equal(ab, lower_band(R.T @ sparse.diags(1.0 / cvar) @ R + P2, min_band=1))
+    assert ab.shape[0] - 1 == (2 if lags == "none" else int(np.max(cols[:, 2] - cols[:, 0])))
+    # and back to a sparse matrix (the solver's fallback) without loss
+    assert abs(_band_matrix(ab) - (R.T @ sparse.diags(1.0 / cvar) @ R + P2)).max() < 1e-12
+
+
+def test_column_filters_equal_scipys_filters_column_by_column():
+    """``hampel_columns`` and ``butterworth_columns`` against SciPy's own 1-D filters applied to each
+    column (NaN runs bridged linearly for filtering and restored; too-short columns left alone)."""
+    from scipy.ndimage import median_filter
+    from scipy.signal import butter, filtfilt
+
+    from probreg.filtering import butterworth_columns, hampel_columns
+
+    rng = np.random.default_rng(4)
+    F = 120
+    X = np.cumsum(rng.normal(0, 1, (F, 5)), axis=0)
+    X[rng.random((F, 5)) < 0.1] = np.nan
+    X[::17, 1] += 40.0  # outliers
+    X[:, 4] = np.nan
+    X[3, 4] = 1.0  # one sample only: too short for either filter
+    t = np.arange(F)
+    H, B = hampel_columns(X, 4, 3.0, min_scale=1.0), butterworth_columns(X, 50.0, 6.0)
+    b, a = butter(2, 6.0 / 25.0)
+    for k in range(5):
+        ok = np.isfinite(X[:, k])
+        if ok.sum() < 12:
+            assert np.array_equal(H[:, k], X[:, k], equal_nan=True) and np.array_equal(B[:, k], X[:, k], equal_nan=True)
+            continue
+        xi = np.interp(t, t[ok], X[ok, k])
+        med = median_filter(xi, size=9, mode="nearest")
+        mad = 1.4826 * median_filter(np.abs(xi - med), size=9, mode="nearest")
+        ref = np.where(np.abs(xi - med) > 3.0 * np.maximum(mad, 1.0), np.nan, X[:, k])
+        assert np.array_equal(H[:, k], ref, equal_nan=True)
+        assert np.array_equal(B[:, k], np.where(ok, filtfilt(b, a, xi, padlen=9), np.nan), equal_nan=True)
+    assert np.isnan(H[:, 1]).sum() >= np.isnan(X[:, 1]).sum() + 3  # the data have outliers, and they are out
+
+
 def test_series_smoother_reduces_noise_with_gaps():
     rng = np.random.default_rng(5)
     t = np.arange(400)
