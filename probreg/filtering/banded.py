@@ -19,15 +19,38 @@ __all__ = ["SeriesSystem", "band_inverse_diagonals", "lower_band"]
 def _band_add(ab, cols, vals, w):
     """``ab += sum_rows w_r v_r v_r'`` (each row ``v_r`` given by its columns ``cols[r]`` and
     values ``vals[r]``) in lower band storage ``ab[i - j, j] = A[i, j]``."""
-    # every product v_ra v_rb of a row in one sum over the flat band index (one bincount
-    # instead of p^2 scattered adds)
-    r = np.asarray(cols)[:, :, None]
-    c = np.asarray(cols)[:, None, :]
-    keep = np.broadcast_to(r >= c, (len(cols),) + (cols.shape[1],) * 2)
-    flat = ((r - c) * ab.shape[1] + c)[keep]
-    w = np.broadcast_to(np.asarray(w, float), (len(cols),))
-    prod = (w[:, None, None] * vals[:, :, None] * vals[:, None, :])[keep]
-    ab += np.bincount(flat, prod, minlength=ab.size).reshape(ab.shape)
+    _BandTerm(cols, vals, ab.shape[1]).add(ab, w)
+
+
+class _BandTerm:
+    """Fixed rows ``v_r`` (columns ``cols``, values ``vals``, (m, p) each) of a sum
+    ``sum_r w_r v_r v_r'`` into lower band storage of ``n`` columns: the index arithmetic done once,
+    :meth:`add` for each weight vector (a system solved again and again with new variances keeps
+    its rows).  Every product ``v_ra v_rb`` of a row goes into one sum over the flat band index
+    (one ``bincount`` instead of ``p^2`` scattered adds).
+
+    >>> ab = np.zeros((2, 3)); _BandTerm(np.array([[0, 1]]), np.array([[1.0, -1.0]]), 3).add(ab, 2.0)
+    >>> ab.tolist()   # 2 (x0 - x1)^2: diagonal 2, 2, 0; first sub-diagonal -2
+    [[2.0, 2.0, 0.0], [-2.0, 0.0, 0.0]]
+    """
+
+    def __init__(self, cols, vals, n):
+        cols, vals = np.asarray(cols), np.asarray(vals, float)
+        r, c = cols[:, :, None], cols[:, None, :]
+        shape = (len(cols),) + (cols.shape[1],) * 2
+        keep = np.broadcast_to(r >= c, shape)
+        self.n, self.m = int(n), len(cols)
+        self.flat = ((r - c) * self.n + c)[keep]
+        self.row = np.broadcast_to(np.arange(len(cols))[:, None, None], shape)[keep]
+        self.va = np.broadcast_to(vals[:, :, None], shape)[keep]
+        self.vb = np.broadcast_to(vals[:, None, :], shape)[keep]
+        #: the farthest sub-diagonal a row reaches
+        self.reach = int(np.max(cols.max(1) - cols.min(1))) if len(cols) else 0
+
+    def add(self, ab, w):
+        """``ab += sum_r w_r v_r v_r'`` (``w`` one weight per row, or one for all)."""
+        w = np.broadcast_to(np.asarray(w, float), (self.m,))
+        ab += np.bincount(self.flat, (w[self.row] * self.va) * self.vb, minlength=ab.size).reshape(ab.shape)
 
 
 class SeriesSystem:
@@ -57,7 +80,8 @@ class SeriesSystem:
         lag = np.asarray(lag, float)
         # stride tie rows: x_t - (1 - a) x_k - a x_{k+1}
         self.tie_cols, self.tie_vals, self.has = _tie_rows(lag)
-        self.u = max(int(np.max(self.tie_cols[:, 2] - self.tie_cols[:, 0])) if len(self.tie_cols) else 0, 2)
+        self._ties = _BandTerm(self.tie_cols, self.tie_vals, F)
+        self.u = max(self._ties.reach, 2)
         # AR(1) precision Q = B' B (B lower bidiagonal: the innovations), masked to the observed
         # frames: Qm, tridiagonal
         rho = float(np.clip(rho, 0.0, 0.9))
@@ -111,7 +135,7 @@ class SeriesSystem:
         from scipy.linalg import cho_solve_banded, cholesky_banded
 
         ab = self.base.copy()
-        _band_add(ab, self.tie_cols, self.tie_vals, sn2 / np.asarray(cvar, float))
+        self._ties.add(ab, sn2 / np.asarray(cvar, float))
         L = cholesky_banded(ab, lower=True, check_finite=False)
         x = cho_solve_banded((L, True), self.qm(y0), check_finite=False)
         # tr(A^-1 Qm) needs only the diagonal and first sub-diagonal of A^-1 (Qm is tridiagonal)
@@ -217,9 +241,9 @@ def _tie_rows(lag):
     return np.column_stack([t[has], k, k + 1]), np.column_stack([np.ones(len(k)), -(1 - a), -a]), has
 
 
-def _prior_band(tie_cols, tie_vals, cvar, p2_band, min_band=1):
+def _prior_band(ties, cvar, p2_band, min_band=1):
     """The prior precision ``R' diag(1 / cvar) R + P2`` of one joint in lower band storage,
-    assembled directly (``tie_cols``, ``tie_vals``: the rows of ``R``, :func:`_tie_rows`;
+    assembled directly (``ties``: the rows of ``R`` as a :class:`_BandTerm`, from :func:`_tie_rows`;
     ``p2_band``: the smoothness term's band), with as many sub-diagonals as its non-zero entries
     reach (at least ``min_band``).  The same numbers, summed in the same order, as the sparse
     products (:func:`probreg.filtering.banded.lower_band` of them) that it replaces: 17 joints a
@@ -229,15 +253,14 @@ def _prior_band(tie_cols, tie_vals, cvar, p2_band, min_band=1):
     >>> from probreg.filtering.periodic import _coupling, _smoothness
     >>> lag = np.full(30, 7.4); cols, vals, _ = _tie_rows(lag); R = _coupling(lag)[0]
     >>> P2 = _smoothness(30, 50.0, 7.0); cvar = np.linspace(0.5, 2.0, len(cols))
-    >>> ab = _prior_band(cols, vals, cvar, lower_band(P2))
+    >>> ab = _prior_band(_BandTerm(cols, vals, 30), cvar, lower_band(P2))
     >>> np.array_equal(ab, lower_band(R.T @ sparse.diags(1.0 / cvar) @ R + P2, min_band=1))
     True
     """
     F = p2_band.shape[1]
-    u = max(int(np.max(tie_cols[:, -1] - tie_cols[:, 0])) if len(tie_cols) else 0, p2_band.shape[0] - 1)
-    ab = np.zeros((u + 1, F))
-    if len(tie_cols):
-        _band_add(ab, tie_cols, tie_vals, 1.0 / np.asarray(cvar, float))
+    ab = np.zeros((max(ties.reach, p2_band.shape[0] - 1) + 1, F))
+    if ties.m:
+        ties.add(ab, 1.0 / np.asarray(cvar, float))
     ab[:p2_band.shape[0]] += p2_band
     nonzero = np.flatnonzero(np.any(ab != 0, axis=1))
     return ab[:max(int(nonzero[-1]) if len(nonzero) else 0, min_band) + 1]

@@ -25,7 +25,7 @@ from collections import OrderedDict
 
 import numpy as np
 
-from .banded import SeriesSystem, _band_add, _tie_rows, band_inverse_diagonals
+from .banded import SeriesSystem, _BandTerm, _tie_rows, band_inverse_diagonals
 
 __all__ = ["PairSystem", "pair_system", "periodic_smooth_pair"]
 
@@ -69,6 +69,9 @@ class PairSystem:
         if len(cols):
             width.append(int(np.max(self.pair_cols[:, 2] - self.pair_cols[:, 0])))
         self.u = max(width)
+        # the stride ties of both series and the half-stride ties, as fixed rows of the interleaved band
+        self._ties = [_BandTerm(2 * S.tie_cols + s, S.tie_vals, 2 * F) for s, S in enumerate(self.series)]
+        self._pair_ties = _BandTerm(self.pair_cols, self.pair_vals, 2 * F)
         # each series' fixed band (noise precision and smoothness) in interleaved storage: series
         # band d -> interleaved band 2 d, at the series' own columns (the two never share an entry)
         self._base_il = []
@@ -108,11 +111,11 @@ class PairSystem:
         ab = self._base_il[0] / sn2s[0] + self._base_il[1] / sn2s[1]
         rhs = np.zeros(2 * F)
         for s, S in enumerate(self.series):
-            _band_add(ab, 2 * S.tie_cols + s, S.tie_vals, 1.0 / np.asarray(cvars[s], float))
+            self._ties[s].add(ab, 1.0 / np.asarray(cvars[s], float))
             rhs[s::2] = S.qm(y0s[s]) / sn2s[s]
         if len(self.pair_cols):
             w = 1.0 / np.asarray(avar, float)
-            _band_add(ab, self.pair_cols, self.pair_vals, w)
+            self._pair_ties.add(ab, w)
             if offset is not None:
                 np.add.at(rhs, self.pair_cols, self.pair_vals * (w * offset)[:, None])
         L = cholesky_banded(ab, lower=True, check_finite=False)

@@ -14,7 +14,7 @@ import warnings
 import numpy as np
 from scipy.ndimage import median_filter
 
-from .banded import SeriesSystem, _band_matrix, _prior_band, _tie_rows, lower_band
+from .banded import SeriesSystem, _band_matrix, _BandTerm, _prior_band, _tie_rows, lower_band
 from .basic import _lowpass_series, butterworth, butterworth_columns, fill_gaps, hampel_columns, noise_model
 
 __all__ = ["periodic_smooth", "periodic_smooth_series", "score_noise_scale", "stride_lags", "stride_period_frames",
@@ -589,7 +589,7 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
         cut[[3, 6]] = ankle_cutoff_hz  # H36M r_ankle, l_ankle
     # smoothness relative to the mean data weight, one matrix per distinct cut-off
     P2s = {c: lower_band(_smoothness(F, fps, c).multiply(np.mean(1.0 / sn2_all))) for c in set(cut.tolist())}
-    tie_cols, tie_vals, _ = _tie_rows(lag)
+    ties = _BandTerm(*_tie_rows(lag)[:2], F)  # every joint's stride ties: the same rows
     out = np.full_like(kp, np.nan)
     out[..., 2:] = kp[..., 2:]
     short_gap = np.zeros((F, 17), bool)
@@ -619,7 +619,7 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
             sv2 = float(np.mean(np.var(yi, axis=0)))
         sv2 = max(sv2, 0.05 * float(np.median(sn2_all)))
         cvar = 2 * sv2 + timing
-        prior = _prior_band(tie_cols, tie_vals, cvar, P2s[float(cut[j])])
+        prior = _prior_band(ties, cvar, P2s[float(cut[j])])
         rs2 = None if rel_sd is None else np.nan_to_num(np.asarray(rel_sd, float)[:, j], nan=1.0) ** 2
         x, w = _robust_fit(y, okj, prior, Q, sn2_all, rs2, robust_iters, outlier_k)
         fits[j] = (prior, w)

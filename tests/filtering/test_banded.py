@@ -73,7 +73,7 @@ def test_prior_band_is_the_sparse_prior_to_the_bit(lags):
     """The keypoint smoother's per-joint prior assembled in band storage must be, bit for bit, the
     band of the sparse ``R' diag(1/cvar) R + P2`` it replaced (the cleaning's results depend on it
     to the last bit), for stride lags that vary, that are all missing or partly missing."""
-    from probreg.filtering.banded import _band_matrix, _prior_band, _tie_rows
+    from probreg.filtering.banded import _band_matrix, _BandTerm, _prior_band, _tie_rows
     from probreg.filtering.periodic import _coupling, _smoothness
 
     rng = np.random.default_rng(3)
@@ -88,7 +88,7 @@ def test_prior_band_is_the_sparse_prior_to_the_bit(lags):
     assert np.array_equal(has, has_r) and len(cols) == R.shape[0] == has.sum()
     cvar = rng.uniform(0.1, 3.0, len(cols))
     P2 = _smoothness(F, 50.0, 7.0) * 3.7
-    ab = _prior_band(cols, vals, cvar, lower_band(P2))
+    ab = _prior_band(_BandTerm(cols, vals, F), cvar, lower_band(P2))
     assert np.array_equal(ab, lower_band(R.T @ sparse.diags(1.0 / cvar) @ R + P2, min_band=1))
     assert ab.shape[0] - 1 == (2 if lags == "none" else int(np.max(cols[:, 2] - cols[:, 0])))
     # and back to a sparse matrix (the solver's fallback) without loss
