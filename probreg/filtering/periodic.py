@@ -233,12 +233,14 @@ def _local_lags(y, T0, half_window=6, search=3.0, step=0.1):
     return lag
 
 
-def _coupling(lag):
+def _coupling(lag, rows=None):
     """Sparse operator ``(R x)_i = x_t - x(t + lag_t)`` (linear interpolation) over the frames
-    with a partner one stride later; returns ``(R, has)``, ``has`` marking those frames."""
+    with a partner one stride later; returns ``(R, has)``, ``has`` marking those frames.
+    ``rows``: the ties' ``(cols, vals, has)`` from :func:`probreg.filtering.banded._tie_rows`, when
+    the caller has them already."""
     from scipy import sparse
 
-    cols, vals, has = _tie_rows(lag)
+    cols, vals, has = _tie_rows(lag) if rows is None else rows
     m = len(cols)
     R = sparse.csr_matrix((vals.T.ravel(), (np.tile(np.arange(m), 3), cols.T.ravel())), shape=(m, len(lag)))
     return R, has
@@ -581,7 +583,8 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
         return None
     sn = noise / scale  # noise sd per frame in relative units
     t = np.arange(F)
-    R, has = _coupling(lag)
+    rows = _tie_rows(lag)
+    R, has = _coupling(lag, rows)
     Q = _ar1_precision(F, rho)
     sn2_all = sn**2
     cut = np.array(np.broadcast_to(np.asarray(smooth_cutoff_hz, float), (17,)))
@@ -589,7 +592,7 @@ def periodic_smooth(keypoints_px, fps, noise_px=None, noise_rho=None, smooth_cut
         cut[[3, 6]] = ankle_cutoff_hz  # H36M r_ankle, l_ankle
     # smoothness relative to the mean data weight, one matrix per distinct cut-off
     P2s = {c: lower_band(_smoothness(F, fps, c).multiply(np.mean(1.0 / sn2_all))) for c in set(cut.tolist())}
-    ties = _BandTerm(*_tie_rows(lag)[:2], F)  # every joint's stride ties: the same rows
+    ties = _BandTerm(*rows[:2], F)  # every joint's stride ties: the same rows
     out = np.full_like(kp, np.nan)
     out[..., 2:] = kp[..., 2:]
     short_gap = np.zeros((F, 17), bool)

@@ -450,7 +450,8 @@ def _prepare(cameras, keypoints_px, fps, segments_m, track, config):
     if not set(LIFTED_SEGMENTS) <= set(seg):  # the lengths not given are estimated from the clip
         seg = {**estimate_segments(cams, kp, track, fps), **seg}
     return {"F": F, "kp": kp, "raw_missing": raw_missing, "cross": cross, "cams": cams, "track": track,
-            "seg": seg, "rays": pixel_rays(cams, kp[..., :2]), "left": track.left, "fwd": track.forward}
+            "seg": seg, "rays": (rays := pixel_rays(cams, kp[..., :2])), "missing": ~np.all(np.isfinite(rays), -1),
+            "left": track.left, "fwd": track.forward}
 
 
 def _cast(preps, fps, config):
@@ -528,7 +529,7 @@ def _cast(preps, fps, config):
         miss[:, J[mid]] = np.linalg.norm(chosen[:, 0] - r, axis=-1) - seg[s1]
         miss[:, J[end]] = np.linalg.norm(chosen[:, 1] - chosen[:, 0], axis=-1) - seg[s2]
     # a joint whose ray is missing stays missing (no candidate is invented)
-    joints[~np.all(np.isfinite(rays), -1)] = np.nan
+    joints[np.concatenate([p["missing"] for p in preps])] = np.nan
     return joints.reshape(N, F, 17, 3), miss.reshape(N, F, 17)
 
 
@@ -544,7 +545,7 @@ def _finish(p, joints, miss, fps, config, stride_lag):
                 joints, p["fwd"], lag, fps, rho=config.angle_noise_rho, smooth_cutoff_hz=config.angle_smooth_cutoff_hz,
                 pair_min_sd=config.left_right_min_sd_deg)
     # per-frame status, the first that applies (whole-array tests, then one pick per frame)
-    raw_missing, missing = p["raw_missing"], ~np.all(np.isfinite(p["rays"]), -1)
+    raw_missing, missing = p["raw_missing"], p["missing"]
     all_raw = raw_missing.reshape(F, -1).all(1)
     tests = [~p["cams"].valid, all_raw & missing.reshape(F, -1).all(1), np.isnan(joints).reshape(F, -1).any(1), all_raw]
     names = np.array(["no_camera", "no_detection", "partial", "interpolated", "ok"], object)
