@@ -65,7 +65,7 @@ from ..filtering import clean_keypoints, keypoints_noisy, noise_model, relabel_l
 from ..geometry import JOINT_INDEX, SEGMENT_BONES
 from ..geometry.rays import CameraArrays, _as_list
 from ..lifting import LiftConfig
-from ..lifting.trajectory import _runs, camera_track_config, fit_ground_track
+from ..lifting.trajectory import _runs, camera_track_config, fit_ground_track, fit_ground_tracks
 from .bands import stance_window
 from .camera_path import CameraPath, along_path
 from .heights import (HEIGHT_SYSTEMATIC_SD, height_grid, identity_height, lens_conflict, limb_consistency,
@@ -427,8 +427,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
                           for s in OBSERVED_SEGMENTS}
         # contacts are detected once (reference height) so every hypothesis is scored on the
         # same measurements; the filter's noise scales with the hypothesis (scale ~ height)
-        ref = fit_ground_track(self.cameras_at(self.h_ref), self.kp, self.fps)
-        self.contacts = ref.contacts
+        self.contacts = fit_ground_track(self.cameras_at(self.h_ref), self.kp, self.fps).contacts
         self.stance_windows = self._stance_windows()
         slides = np.full((G, len(self.stance_windows)), np.nan)
         n_frames = max(int(self.valid.sum()), 1)
@@ -437,15 +436,17 @@ class ClipModel(DrawPropagation, EmceeSampling):
         self.f_ref_grid, self.speed_grid = np.full(G, np.nan), np.full(G, np.nan)  # and the athlete's speed
         zoom = self.lens.evidence.zoom if self.lens is not None else np.ones(self.F)
         pelvis = self.kp[:, JOINT_INDEX["pelvis"], :2]
+        scored = {}  # grid index -> (each frame's own member, the members along the path, frames bridged)
         for g, h in enumerate(self.grid):
             raw = self.cameras_at(h, smooth=False)  # each frame's own member: the static term's spread
             cams = along_path(self.camera_path, raw)
             if cams.valid.any():
                 self.f_ref_grid[g] = float(np.nanmedian(cams.focal_px[cams.valid] / zoom[cams.valid]))
-            if cams.valid.sum() < 3:
-                continue
-            tr = fit_ground_track(cams, self.kp, self.fps, contacts=self.contacts,
-                                  config=camera_track_config(cams, pelvis, self.noise_sd))
+            if cams.valid.sum() >= 3:  # (cameras_at sets gap_distance anew for every height)
+                scored[g] = raw, cams, self.gap_distance
+        tracks = fit_ground_tracks([c for _, c, _ in scored.values()], [self.kp] * len(scored), self.fps, self.contacts,
+                                   [camera_track_config(c, pelvis, self.noise_sd) for _, c, _ in scored.values()])
+        for (g, (raw, cams, gap)), tr in zip(scored.items(), tracks):  # every height's track from one filter pass
             # tempered to one contact's worth: the filter's innovations are not independent
             # (the same feet, seen through one camera path), and its value under wrong
             # heights is dominated by unmodelled effects; undamped it would swamp every
@@ -464,9 +465,9 @@ class ClipModel(DrawPropagation, EmceeSampling):
             # a frame with lanes whose family has no member at this height (h beyond the
             # frame's branch) counts like a frame 10 % off the common position: otherwise a
             # height reached by a few odd frames only would be scored on those frames alone
-            no_member = self.valid & ~(raw.valid & (self.gap_distance == 0))
+            no_member = self.valid & ~(raw.valid & (gap == 0))
             static_parts[g] = ((ys - np.median(ys)) / dist, int(no_member.sum()),
-                               member_jitter(raw.C[:, 1], raw.valid & (self.gap_distance == 0), dist))
+                               member_jitter(raw.C[:, 1], raw.valid & (gap == 0), dist))
             self._segment_stats(g, cams, tr)
             slides[g] = self._slides(cams, tr)
         self.ll_static = score_static(static_parts, len(self.grid), n_frames)[0]

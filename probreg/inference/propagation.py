@@ -11,7 +11,7 @@ import numpy as np
 from ..analysis import gait_summary
 from ..filtering import clean_keypoints, score_noise_scale, stride_lags
 from ..geometry import ANGLE_NAMES, JOINT_INDEX, CameraArrays
-from ..lifting import LiftConfig, fit_ground_track, lift_many
+from ..lifting import LiftConfig, fit_ground_track, fit_ground_tracks, lift_many
 from ..lifting.raycast import BATCH_ROWS
 from ..lifting.trajectory import camera_track_config
 from .parallel import default_workers, fork_call, fork_map, stop_flag
@@ -290,10 +290,13 @@ class DrawPropagation:
             # (the keypoint noise cast onto the ground: large across the track in a grazing view)
             tcfg = camera_track_config(cams, self.kp[:, JOINT_INDEX["pelvis"], :2], self.noise_sd)
             for suffix, kp in variants:
-                # the same contacts for every draw (detected once on the cleaned keypoints)
-                tr = fit_ground_track(cams, kp, self.fps, contacts=self.contacts, config=tcfg)
-                jobs.append((cams, kp, seg, tr))
+                jobs.append((cams, kp, seg))
                 meta.append((s, suffix, cams, tcfg, kp))
+        # the ground tracks of all these liftings in one filter pass, with the same contacts for
+        # every draw (detected once on the cleaned keypoints)
+        tracks = fit_ground_tracks([m[2] for m in meta], [m[4] for m in meta], self.fps, self.contacts,
+                                   [m[3] for m in meta])
+        jobs = [job + (tr,) for job, tr in zip(jobs, tracks)]
         out = {s: {} for s in indices}
         for (s, suffix, cams, tcfg, kp), res in zip(meta, lift_many(jobs, self.fps, cfg, self.stride_lag)):
             res_s = out[s]

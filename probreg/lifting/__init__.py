@@ -22,6 +22,7 @@ from .trajectory import (
     cast_ankles,
     detect_contacts,
     fit_ground_track,
+    fit_ground_tracks,
     gate_contacts_by_height,
     sagittal_ankle_height,
     sagittal_ankle_points,
@@ -31,6 +32,6 @@ __all__ = [
     "LiftConfig", "LiftResult", "estimate_segments", "implausible_segments", "lift", "lift_many",
     "smooth_angles_across_strides",
     "ANTHROPOMETRIC_RATIOS", "GroundTrack", "TrackConfig", "camera_track_config", "cast_ankles", "detect_contacts",
-    "fit_ground_track", "sagittal_ankle_points", "sagittal_ankle_height",
+    "fit_ground_track", "fit_ground_tracks", "sagittal_ankle_points", "sagittal_ankle_height",
     "gate_contacts_by_height",
 ]

@@ -13,6 +13,7 @@ camera hypothesis implies (the Bayesian model uses it).
 
 from __future__ import annotations
 
+import functools
 import math
 import warnings
 from dataclasses import dataclass
@@ -20,9 +21,12 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry import JOINT_INDEX
+from .kalman import (_pairs_decoupled, forward_pass_batch, gated_forward_pass, rts_backward,  # noqa: F401
+                     rts_backward_batch)
 
 __all__ = ["GroundTrack", "TrackConfig", "camera_track_config", "cast_ankles", "detect_contacts", "fit_ground_track",
-           "sagittal_ankle_points", "sagittal_ankle_height", "gate_contacts_by_height", "gated_forward_pass", "rts_backward"]
+           "fit_ground_tracks", "sagittal_ankle_points", "sagittal_ankle_height", "gate_contacts_by_height",
+           "gated_forward_pass", "rts_backward"]
 
 
 @dataclass(frozen=True)
@@ -373,13 +377,52 @@ def gate_contacts_by_height(contacts, height_m, margin_m, min_frames=2):
     return out
 
 
-def _track_from_contacts(ankles, contacts, fps, config):
-    """The Kalman/RTS ground track from cast ankles (F, 2, 3) and fixed contact flags."""
-    from filterpy.common import Q_discrete_white_noise
-    from filterpy.kalman import KalmanFilter
+@dataclass(frozen=True)
+class _TrackSetup:
+    """What the ground-track filter of one hypothesis runs on (:func:`_track_setup`)."""
 
+    meas: dict  # frame -> 2-D measurement
+    R: np.ndarray  # (2, 2) measurement covariance
+    x0: np.ndarray  # (4,) start state [x, vx, y, vy]
+    P0: np.ndarray  # (4,) start variances
+    cps: np.ndarray
+    status: str
+    half_step: float
+    dt: float
+    F: np.ndarray
+    Q: np.ndarray
+
+    @property
+    def first(self):
+        return min(self.meas)
+
+    def track(self, xs, Ps, loglik, contacts):
+        return GroundTrack(position_m=xs[:, [0, 2]], velocity_mps=xs[:, [1, 3]], cov=Ps, contacts=contacts,
+                           contact_points_m=self.cps, log_likelihood=loglik, status=self.status,
+                           half_step_m=self.half_step)
+
+
+@functools.lru_cache(maxsize=16)
+def _motion_model(fps, accel_std_mps2):
+    """``(dt, F, Q)`` of the ground track's two constant-velocity axes (read-only arrays, made
+    once per frame rate and process noise)."""
+    from filterpy.common import Q_discrete_white_noise
+
+    dt = 1.0 / fps
+    Q = np.zeros((4, 4))
+    Q[:2, :2] = Q_discrete_white_noise(2, dt=dt, var=accel_std_mps2[0] ** 2)
+    Q[2:, 2:] = Q_discrete_white_noise(2, dt=dt, var=accel_std_mps2[1] ** 2)
+    F = np.kron(np.eye(2), np.array([[1.0, dt], [0.0, 1.0]]))
+    F.flags.writeable = Q.flags.writeable = False
+    return dt, F, Q
+
+
+def _track_setup(ankles, contacts, fps, config, cps=None):
+    """The measurements, noise and start of the ground-track filter from cast ankles (F, 2, 3)
+    and fixed contact flags (``cps``: their contact points when known): a :class:`_TrackSetup`,
+    or the finished all-NaN :class:`GroundTrack` when there is nothing to measure."""
     F = len(ankles)
-    cps = _contact_points(ankles, contacts)
+    cps = _contact_points(ankles, contacts) if cps is None else cps
     if len(cps) >= 3:
         # athletes keep to their lane: a "contact" far off the clip's median lateral position
         # is a swinging foot cast beyond the athlete, not a footprint
@@ -407,18 +450,11 @@ def _track_from_contacts(ankles, contacts, fps, config):
             body = np.nanmean(ankles[..., :2], axis=1) if np.isfinite(ankles).any() else np.full((F, 2), np.nan)
         meas = {i: body[i] for i in range(F) if np.all(np.isfinite(body[i]))}
         R_meas = np.diag([0.5**2, 0.3**2])
-    dt = 1.0 / fps
-    kf = KalmanFilter(dim_x=4, dim_z=2)
-    kf.F = np.kron(np.eye(2), np.array([[1.0, dt], [0.0, 1.0]]))
-    kf.H = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
-    kf.Q = np.zeros((4, 4))
-    kf.Q[:2, :2] = Q_discrete_white_noise(2, dt=dt, var=config.accel_std_mps2[0] ** 2)
-    kf.Q[2:, 2:] = Q_discrete_white_noise(2, dt=dt, var=config.accel_std_mps2[1] ** 2)
-    kf.R = R_meas
     keys = sorted(meas)
     if not keys:
         nan = np.full((F, 2), np.nan)
         return GroundTrack(nan, nan, np.full((F, 4, 4), np.nan), contacts, cps, -np.inf, "no_feet")
+    dt, Fm, Q = _motion_model(float(fps), tuple(config.accel_std_mps2))
     # initial state from the first measurements
     if len(keys) >= 2:
         k0, k1 = keys[0], keys[-1]
@@ -433,182 +469,95 @@ def _track_from_contacts(ankles, contacts, fps, config):
     lat0 = np.array([meas[k][1] for k in keys])
     p0[1] = float(np.median(lat0))
     sd0 = 1.4826 * float(np.median(np.abs(lat0 - p0[1]))) if len(keys) >= 3 else 0.7
-    kf.x = np.array([p0[0], v0[0], p0[1], v0[1]])
-    kf.P = np.diag([4.0, 4.0, float(np.clip(sd0, 0.05, 0.7)) ** 2, 0.1**2])
-    xs, Ps, loglik = gated_forward_pass(kf, meas, F, first=keys[0], max_rejected_run=config.max_rejected_run)
-    xs, Ps = rts_backward(xs, Ps, kf.F, kf.Q)
-    return GroundTrack(position_m=xs[:, [0, 2]], velocity_mps=xs[:, [1, 3]], cov=Ps, contacts=contacts,
-                       contact_points_m=cps, log_likelihood=loglik, status=status, half_step_m=half_step)
+    return _TrackSetup(meas=meas, R=R_meas, x0=np.array([p0[0], v0[0], p0[1], v0[1]]),
+                       P0=np.array([4.0, 4.0, float(np.clip(sd0, 0.05, 0.7)) ** 2, 0.1**2]), cps=cps,
+                       status=status, half_step=half_step, dt=dt, F=Fm, Q=Q)
 
 
-def gated_forward_pass(kf, meas, n, first=None, max_rejected_run=2, gate=16.0):
-    """The forward pass of the ground-track filter: ``(xs (n, 4), Ps (n, 4, 4), log_likelihood)``.
+def _track_from_contacts(ankles, contacts, fps, config):
+    """The Kalman/RTS ground track from cast ankles (F, 2, 3) and fixed contact flags."""
+    from filterpy.kalman import KalmanFilter
 
-    ``kf`` is a ``filterpy`` ``KalmanFilter`` of two independent constant-velocity axes (state
-    ``[x, vx, y, vy]``, ``H`` picking ``x`` and ``y``; ``F``, ``Q``, ``R`` and the start ``P``
-    without cross-axis terms, as :func:`_track_from_contacts` builds it); ``meas`` maps a frame
-    index to its 2-D measurement.  Each step is ``kf.predict()`` then, for a measured frame,
-    ``kf.update(z)`` -- the same formulas (Joseph-form update) written per axis in scalars, which
-    the block structure keeps exact (other models are refused) and which takes a seventh of the
-    time of filterpy's calls (the filter runs for every posterior draw).  An innovation whose squared Mahalanobis length exceeds
-    ``gate`` (chi-square, 2 dof, p ~ 3e-4) is not used, except on frame ``first``, but still
-    costs its Gaussian log-density with the exponent capped at the gate, so that hypotheses
-    cannot hide data; after ``max_rejected_run`` rejections in a row the filter, not the
-    footprints, went astray: its covariance restarts from the start ``P`` and the measurement
-    is taken.
-
-    >>> from filterpy.common import Q_discrete_white_noise
-    >>> from filterpy.kalman import KalmanFilter
-    >>> kf = KalmanFilter(dim_x=4, dim_z=2); dt = 0.02
-    >>> kf.F = np.kron(np.eye(2), np.array([[1.0, dt], [0.0, 1.0]])); kf.H = np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]])
-    >>> kf.Q = np.zeros((4, 4)); kf.Q[:2, :2] = Q_discrete_white_noise(2, dt=dt, var=2.0)
-    >>> kf.Q[2:, 2:] = Q_discrete_white_noise(2, dt=dt, var=0.4); kf.R = np.diag([0.01, 0.001])
-    >>> kf.x = np.array([0.0, 9.0, 0.0, 0.0]); kf.P = np.diag([4.0, 4.0, 0.09, 0.01])
-    >>> meas = {i: np.array([0.18 * i + 0.05 * np.sin(i), 0.02 * np.cos(i)]) for i in range(0, 40, 3)}
-    >>> xs, Ps, _ = gated_forward_pass(kf, meas, 40, first=0)
-    >>> ref = []
-    >>> for i in range(40):
-    ...     if i > 0: kf.predict()
-    ...     if i in meas: kf.update(meas[i])
-    ...     ref.append((kf.x.copy(), kf.P.copy()))
-    >>> bool(np.allclose(xs, [r[0] for r in ref], rtol=1e-12, atol=1e-12)
-    ...      and np.allclose(Ps, [r[1] for r in ref], rtol=1e-12, atol=1e-12))
-    True
-    """
-    dt = float(kf.F[0, 1])
-    pair = np.array([0, 0, 1, 1])
-    cross = pair[:, None] != pair[None, :]
-    if (not np.array_equal(kf.F, np.kron(np.eye(2), [[1.0, dt], [0.0, 1.0]]))
-            or not np.array_equal(kf.H, [[1.0, 0, 0, 0], [0, 0, 1.0, 0]]) or np.any(np.asarray(kf.R)[[0, 1], [1, 0]])
-            or np.any(np.asarray(kf.Q)[cross]) or np.any(np.asarray(kf.P)[cross])):
-        raise ValueError("gated_forward_pass needs two independent constant-velocity axes (F, H, Q, R, P "
-                         "as _track_from_contacts builds them)")
-    q = [(float(kf.Q[o, o]), float(kf.Q[o, o + 1]), float(kf.Q[o + 1, o + 1])) for o in (0, 2)]
-    r = (float(kf.R[0, 0]), float(kf.R[1, 1]))
-    x0 = np.asarray(kf.x, float).ravel()
-    P0 = np.asarray(kf.P, float)
-    start = [(float(P0[o, o]), float(P0[o, o + 1]), float(P0[o + 1, o + 1])) for o in (0, 2)]
-    px, vx, py, vy = (float(v) for v in x0)
-    (ax, bx, cx), (ay, by, cy) = start
-    (qx1, qx2, qx3), (qy1, qy2, qy3) = q
-    rx, ry = r
-    log_2pi_sq = 2.0 * math.log(2.0 * math.pi)
-    states, covs = [], []
-    loglik, run_rejected = 0.0, 0
-    for i in range(n):
-        if i > 0:  # predict: x = F x, P = F P F' + Q
-            px, py = px + dt * vx, py + dt * vy
-            ax, bx, cx = ax + dt * (2.0 * bx + dt * cx) + qx1, bx + dt * cx + qx2, cx + qx3
-            ay, by, cy = ay + dt * (2.0 * by + dt * cy) + qy1, by + dt * cy + qy2, cy + qy3
-        z = meas.get(i)
-        if z is not None:
-            zx, zy = float(z[0]), float(z[1])
-            sx, sy = ax + rx, ay + ry
-            ex, ey = zx - px, zy - py
-            nis = ex * ex / sx + ey * ey / sy
-            rejected = nis > gate and i != first
-            loglik += -0.5 * (gate if rejected else nis) - 0.5 * (log_2pi_sq + math.log(sx * sy))
-            take = not rejected
-            if rejected:
-                if run_rejected < max_rejected_run:
-                    run_rejected += 1
-                else:
-                    (ax, bx, cx), (ay, by, cy) = start
-                    sx, sy = ax + rx, ay + ry
-                    take = True
-            if take:
-                run_rejected = 0
-                k0, k1 = ax / sx, bx / sx
-                px, vx = px + k0 * ex, vx + k1 * ex
-                ax, bx, cx = ((1 - k0) ** 2 * ax + k0 * k0 * rx, (1 - k0) * (bx - k1 * ax) + k0 * k1 * rx,
-                              cx - 2.0 * k1 * bx + k1 * k1 * (ax + rx))
-                k0, k1 = ay / sy, by / sy
-                py, vy = py + k0 * ey, vy + k1 * ey
-                ay, by, cy = ((1 - k0) ** 2 * ay + k0 * k0 * ry, (1 - k0) * (by - k1 * ay) + k0 * k1 * ry,
-                              cy - 2.0 * k1 * by + k1 * k1 * (ay + ry))
-        states.append((px, vx, py, vy))
-        covs.append((ax, bx, cx, ay, by, cy))
-    xs = np.array(states, float).reshape(n, 4)
-    c = np.array(covs, float).reshape(n, 6)
-    Ps = np.zeros((n, 4, 4))
-    for o, j in ((0, 0), (2, 3)):
-        Ps[:, o, o], Ps[:, o, o + 1], Ps[:, o + 1, o + 1] = c[:, j], c[:, j + 1], c[:, j + 2]
-        Ps[:, o + 1, o] = c[:, j + 1]
-    return xs, Ps, loglik
+    setup = _track_setup(ankles, contacts, fps, config)
+    if isinstance(setup, GroundTrack):
+        return setup
+    kf = KalmanFilter(dim_x=4, dim_z=2)
+    kf.F, kf.H, kf.Q, kf.R = setup.F, np.array([[1.0, 0, 0, 0], [0, 0, 1.0, 0]]), setup.Q, setup.R
+    kf.x, kf.P = setup.x0, np.diag(setup.P0)
+    xs, Ps, loglik = gated_forward_pass(kf, setup.meas, len(ankles), first=setup.first,
+                                        max_rejected_run=config.max_rejected_run)
+    xs, Ps = rts_backward(xs, Ps, setup.F, setup.Q)
+    return setup.track(xs, Ps, loglik, contacts)
 
 
-def rts_backward(xs, Ps, F, Q):
-    """The Rauch-Tung-Striebel backward pass of a time-invariant model: smoothed states and
-    covariances from the filtered ones ``xs`` (n, d) and ``Ps`` (n, d, d).
+def fit_ground_tracks(cameras, keypoints_px, fps, contacts, configs=None, ankle_height_m=0.07):
+    """:func:`fit_ground_track` with fixed ``contacts`` for many hypotheses at once: a list of
+    :class:`GroundTrack`, the ``h``-th exactly (to the bit) ``fit_ground_track(cameras[h],
+    keypoints_px[h], fps, ankle_height_m, configs[h], contacts)``.
 
-    The recursion of ``filterpy``'s ``KalmanFilter.rts_smoother`` (same formulas, same order),
-    with the predicted covariances and the smoother gains, which depend only on the filtered
-    covariances, computed for all steps at once; only the two short recursions remain a loop.
+    ``cameras`` and ``keypoints_px`` are sequences of one clip's per-frame cameras (e.g. the cameras
+    of every posterior draw or grid height) and keypoints, ``configs`` their :class:`TrackConfig`
+    (default: the default for all).  The contacts' points, the Kalman filter and the RTS smoother
+    run for all hypotheses together (:func:`probreg.lifting.kalman.forward_pass_batch`,
+    :func:`~probreg.lifting.kalman.rts_backward_batch`): one loop over the frames instead of one
+    per hypothesis."""
+    from ..geometry import CameraArrays, camera_arrays
 
-    >>> from filterpy.kalman import KalmanFilter
-    >>> kf = KalmanFilter(dim_x=2, dim_z=1)
-    >>> kf.F = np.array([[1.0, 0.1], [0.0, 1.0]]); kf.H = np.array([[1.0, 0.0]])
-    >>> kf.Q = np.diag([1e-3, 1e-2]); kf.R = np.array([[0.5]]); kf.x = np.zeros(2)
-    >>> xs, Ps = np.zeros((30, 2)), np.zeros((30, 2, 2))
-    >>> for i in range(30):
-    ...     kf.predict(); kf.update(np.array([0.1 * i + np.sin(i)])); xs[i], Ps[i] = kf.x, kf.P
-    >>> x_ref, P_ref, _, _ = kf.rts_smoother(xs, Ps)
-    >>> x, P = rts_backward(xs, Ps, kf.F, kf.Q)
-    >>> bool(np.allclose(x, x_ref, rtol=1e-12, atol=1e-12) and np.allclose(P, P_ref, rtol=1e-12, atol=1e-12))
-    True
-    """
-    x, P = np.array(xs, float), np.array(Ps, float)
-    if len(x) < 2:
-        return x, P
-    Pf = P[:-1]
-    Pp = F @ Pf @ F.T + Q  # predicted covariance of step k + 1 from step k
-    K = Pf @ F.T @ np.linalg.inv(Pp)
-    a = x[:-1] - np.einsum("kij,kj->ki", K, x[:-1] @ F.T)  # x[k] + K (x_s[k + 1] - F x[k])
-    B = Pf - K @ Pp @ np.swapaxes(K, 1, 2)  # P[k] + K (P_s[k + 1] - Pp) K'
-    if _pairs_decoupled(F, Q, P):
-        # independent 2-state axes (the ground track's x and y): the recursions in scalars, a
-        # fifth of the small-matrix products' cost (this runs for every posterior draw)
-        for i in range(0, x.shape[1], 2):
-            _rts_pair(x, P, a, K, B, i, i + 1)
-        return x, P
-    for k in range(len(x) - 2, -1, -1):
-        Kk = K[k]
-        x[k] = a[k] + Kk @ x[k + 1]
-        P[k] = B[k] + Kk @ P[k + 1] @ Kk.T
-    return x, P
-
-
-def _pairs_decoupled(F, Q, P):
-    """Whether the states fall into independent pairs (0, 1), (2, 3), ...: no entry of ``F``,
-    ``Q`` or any ``P`` couples two pairs."""
-    d = F.shape[0]
-    if d % 2 or d < 2:
-        return False
-    pair = np.arange(d) // 2
-    cross = pair[:, None] != pair[None, :]
-    return not (np.any(F[cross]) or np.any(Q[cross]) or np.any(P[:, cross]))
+    configs = [TrackConfig()] * len(cameras) if configs is None else list(configs)
+    if not len(cameras) == len(keypoints_px) == len(configs):
+        raise ValueError("fit_ground_tracks needs as many keypoint arrays and configs as camera sets")
+    if contacts is None:  # each hypothesis detects its own: nothing in common to batch
+        return [fit_ground_track(c, k, fps, ankle_height_m, cfg) for c, k, cfg in zip(cameras, keypoints_px, configs)]
+    contacts = np.asarray(contacts, bool)
+    ankles = [cast_ankles(c if isinstance(c, CameraArrays) else camera_arrays(c), k, ankle_height_m)
+              for c, k in zip(cameras, keypoints_px)]
+    setups = [_track_setup(a, contacts, fps, cfg, cps=cps)
+              for a, cfg, cps in zip(ankles, configs, _contact_points_many(ankles, contacts))]
+    out = [s if isinstance(s, GroundTrack) else None for s in setups]
+    groups = {}
+    for h, s in enumerate(setups):
+        if not isinstance(s, GroundTrack):
+            groups.setdefault((s.Q.tobytes(), int(configs[h].max_rejected_run)), []).append(h)
+    for (_, max_run), idx in groups.items():
+        S = [setups[h] for h in idx]
+        n = len(ankles[idx[0]])
+        z, measured = np.zeros((len(S), n, 2)), np.zeros((len(S), n), bool)
+        for g, s in enumerate(S):
+            frames = list(s.meas)
+            z[g, frames] = [s.meas[k] for k in frames]
+            measured[g, frames] = True
+        Q = S[0].Q
+        xs, Ps, ll = forward_pass_batch(
+            np.array([s.x0 for s in S]), np.array([[s.P0[0], 0.0, s.P0[1], s.P0[2], 0.0, s.P0[3]] for s in S]),
+            np.array([np.diag(s.R) for s in S]), S[0].dt, ((Q[0, 0], Q[0, 1], Q[1, 1]), (Q[2, 2], Q[2, 3], Q[3, 3])),
+            z, measured, np.array([s.first for s in S]), max_rejected_run=max_run)
+        xs, Ps = rts_backward_batch(xs, Ps, S[0].F, Q)
+        for g, h in enumerate(idx):
+            out[h] = S[g].track(xs[g], Ps[g], float(ll[g]), contacts)
+    return out
 
 
-def _rts_pair(x, P, a, K, B, i, j):
-    """The two backward recursions of :func:`rts_backward` for the decoupled state pair
-    ``(i, j)``, in place (the same formulas, ``P`` kept symmetric)."""
-    a0, a1 = a[:, i].tolist(), a[:, j].tolist()
-    k00, k01, k10, k11 = (K[:, u, v].tolist() for u, v in ((i, i), (i, j), (j, i), (j, j)))
-    b00, b01, b11 = (B[:, u, v].tolist() for u, v in ((i, i), (i, j), (j, j)))
-    x0, x1 = float(x[-1, i]), float(x[-1, j])
-    p, q, r = float(P[-1, i, i]), float(P[-1, i, j]), float(P[-1, j, j])
-    n = len(x)
-    xs0, xs1, ps, qs, rs = [0.0] * n, [0.0] * n, [0.0] * n, [0.0] * n, [0.0] * n
-    xs0[-1], xs1[-1], ps[-1], qs[-1], rs[-1] = x0, x1, p, q, r
-    for k in range(n - 2, -1, -1):
-        c00, c01, c10, c11 = k00[k], k01[k], k10[k], k11[k]
-        x0, x1 = a0[k] + c00 * x0 + c01 * x1, a1[k] + c10 * x0 + c11 * x1
-        m00, m01 = c00 * p + c01 * q, c00 * q + c01 * r  # K P
-        m10, m11 = c10 * p + c11 * q, c10 * q + c11 * r
-        p, q, r = b00[k] + m00 * c00 + m01 * c01, b01[k] + m00 * c10 + m01 * c11, b11[k] + m10 * c10 + m11 * c11
-        xs0[k], xs1[k], ps[k], qs[k], rs[k] = x0, x1, p, q, r
-    x[:, i], x[:, j] = xs0, xs1
-    P[:, i, i], P[:, i, j], P[:, j, i], P[:, j, j] = ps, qs, qs, rs
+def _contact_points_many(ankles, contacts):
+    """:func:`_contact_points` of several hypotheses' cast ankles (a list of (F, 2, 3)) under the
+    same contact flags: a list of (K_h, 4), each exactly as that function gives it."""
+    runs = []
+    for s in (0, 1):
+        for a, b in _runs(contacts[:, s]):
+            runs.append(((a + b - 1) / 2, s, a, a + max(1, (b - a + 1) // 2)))
+    runs.sort()  # the order _contact_points sorts its points in (no two runs share a centre and a side)
+    feet = np.stack([np.asarray(a, float)[..., :2] for a in ankles]) if ankles else np.zeros((0, 0, 2, 2))
+    pts = [[] for _ in ankles]
+    for centre, s, lo, hi in runs:
+        run = feet[:, lo:hi, s]  # (H, m, 2)
+        ok = np.all(np.isfinite(run), -1)
+        whole = ok.all(1)
+        if whole.any():
+            for h, (x, y) in zip(np.flatnonzero(whole), np.median(run[whole], axis=1)):
+                pts[h].append((centre, s, x, y))
+        for h in np.flatnonzero(~whole & ok.any(1)):
+            x, y = np.median(run[h][ok[h]], axis=0)
+            pts[h].append((centre, s, x, y))
+    return [np.array(p, float).reshape(-1, 4) for p in pts]
 
 
 def _runs(flags):

@@ -602,3 +602,74 @@ def test_legs_plane_term_centred_on_the_medial_knee_and_ankle():
                                                                  for s in "lr"]))) for j in ("knee", "hip")])
     centred, flat_err = np.mean(errs["centred"], 0), np.mean(errs["flat"], 0)  # (knee, hip)
     assert np.all(centred < 0.6 * flat_err) and centred[0] < 0.5 and centred[1] < 0.3
+
+
+def _same_track(a, b):
+    fields = ("position_m", "velocity_mps", "cov", "contacts", "contact_points_m")
+    return (all(np.array_equal(getattr(a, f), getattr(b, f), equal_nan=True) for f in fields)
+            and a.log_likelihood == b.log_likelihood and a.status == b.status and a.half_step_m == b.half_step_m)
+
+
+@pytest.fixture(scope="module")
+def strides(tmp_path_factory):
+    """A 150-frame clip (eight contacts) without images, its exact keypoints and true cameras."""
+    from probreg.sim import config_from_preset, synthesize, write_clip
+
+    out = tmp_path_factory.mktemp("track") / "run"
+    write_clip(synthesize(config_from_preset("run", 11, n_frames=150), seed=11, preset="run"), out, images=False)
+    clip, gt = load_clip(out), load_groundtruth(out)
+    return clip, gt, np.concatenate([gt.joints2d_px, np.ones((clip.n_frames, 17, 1))], -1)
+
+
+def test_fit_ground_tracks_equals_fit_ground_track_to_the_bit(strides):
+    """The batched ground tracks (every posterior draw's, every grid height's at once) are the
+    single fits bit for bit, whatever each hypothesis meets: cameras moved in height (the
+    family's members), re-noised keypoints, its own contact noise, footprints the gate rejects
+    and filters that restart, a hypothesis with one contact (the de-weighted fallback) and one
+    with no feet at all."""
+    from dataclasses import replace
+
+    from probreg.lifting import fit_ground_tracks
+    from probreg.lifting.trajectory import TrackConfig
+
+    clip, gt, j2 = strides
+    contacts = fit_ground_track(gt.cameras, j2, clip.fps).contacts
+    edges = np.diff(np.concatenate([[0], contacts.any(1).astype(int), [0]]))
+    runs = list(zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)))
+    ankles = [JOINT_INDEX["l_ankle"], JOINT_INDEX["r_ankle"]]
+    base = camera_arrays(gt.cameras)
+    rng = np.random.default_rng(4)
+    cams, kps, cfgs = [], [], []
+    for k in range(12):
+        C = base.C.copy()
+        C[:, 2] *= 1.0 + 0.04 * (k - 6)  # the camera higher or lower: the cast feet move
+        cams.append(replace(base, C=C))
+        kp = j2.copy()
+        kp[..., :2] += rng.normal(0, 0.5 + 0.5 * (k % 3), kp[..., :2].shape)
+        if k % 2 == 0:  # every other one: three footprints ~2 m off and a tight contact noise,
+            for a, b in runs[3:6]:  # so that they fail the gate and the filter restarts
+                kp[a:b, ankles, 0] += 400.0
+        kps.append(kp)
+        std = (0.1 + 0.02 * k, 0.03 + 0.01 * (k % 4)) if k % 2 else (0.004, 0.002)
+        cfgs.append(TrackConfig(contact_std_m=std, max_rejected_run=(2, 1, 2, 0)[k % 4]))
+    few = j2.copy()  # one contact left: the per-frame fallback
+    few[np.flatnonzero(contacts.any(1))[0] + 12:, ankles, :2] = np.nan
+    none = j2.copy()  # no ankle anywhere: an all-NaN track
+    none[:, ankles, :2] = np.nan
+    cams += [base, base]
+    kps += [few, none]
+    cfgs += [TrackConfig(), TrackConfig()]
+    single = [fit_ground_track(c, k, clip.fps, contacts=contacts, config=g) for c, k, g in zip(cams, kps, cfgs)]
+    batch = fit_ground_tracks(cams, kps, clip.fps, contacts, cfgs)
+    assert {t.status for t in single} == {"ok", "few_contacts", "no_feet"}
+    assert all(_same_track(a, b) for a, b in zip(single, batch))
+    # the gate and the restarts did act: without restarts the tight fits come out otherwise
+    stuck = fit_ground_tracks(cams[:12], kps[:12], clip.fps, contacts,
+                              [replace(g, max_rejected_run=10**6) for g in cfgs[:12]])
+    assert sum(not _same_track(a, b) for a, b in zip(single[:12], stuck)) >= 5
+    # without fixed contacts each hypothesis detects its own, as fit_ground_track does
+    own = fit_ground_tracks(cams[:3], kps[:3], clip.fps, None, cfgs[:3])
+    assert all(_same_track(fit_ground_track(c, k, clip.fps, config=g), t)
+               for c, k, g, t in zip(cams[:3], kps[:3], cfgs[:3], own))
+    with pytest.raises(ValueError, match="as many"):
+        fit_ground_tracks(cams, kps[:2], clip.fps, contacts)
