@@ -268,7 +268,7 @@ class DrawPropagation:
     def _lift_group(self, indices, copies, draws, L, seeds, K, noise_copies, noise_seeds, cfg, with_noise, per_joint):
         """:meth:`_propagate_draws` of a group of draws, their liftings cast together; ``copies``
         (noise copy index -> keypoints) is the chunk's, filled here as copies are made."""
-        jobs, meta = [], []  # one lifting each: (draw, suffix, cameras, track config, keypoints)
+        meta = []  # one lifting each: (draw, suffix, cameras, track config, keypoints, segment lengths)
         for s in indices:
             rng = np.random.default_rng(int(seeds[s]))
             h = float(np.exp(draws[s, 0]))
@@ -289,16 +289,14 @@ class DrawPropagation:
             # the ground-track filter's contact noise as the likelihood has it for this camera
             # (the keypoint noise cast onto the ground: large across the track in a grazing view)
             tcfg = camera_track_config(cams, self.kp[:, JOINT_INDEX["pelvis"], :2], self.noise_sd)
-            for suffix, kp in variants:
-                jobs.append((cams, kp, seg))
-                meta.append((s, suffix, cams, tcfg, kp))
+            meta += [(s, suffix, cams, tcfg, kp, seg) for suffix, kp in variants]
         # the ground tracks of all these liftings in one filter pass, with the same contacts for
         # every draw (detected once on the cleaned keypoints)
         tracks = fit_ground_tracks([m[2] for m in meta], [m[4] for m in meta], self.fps, self.contacts,
                                    [m[3] for m in meta])
-        jobs = [job + (tr,) for job, tr in zip(jobs, tracks)]
+        jobs = [(cams, kp, seg, tr) for (_, _, cams, _, kp, seg), tr in zip(meta, tracks)]
         out = {s: {} for s in indices}
-        for (s, suffix, cams, tcfg, kp), res in zip(meta, lift_many(jobs, self.fps, cfg, self.stride_lag)):
+        for (s, suffix, cams, tcfg, kp, _), res in zip(meta, lift_many(jobs, self.fps, cfg, self.stride_lag)):
             res_s = out[s]
             a = res.angles_deg()
             res_s["joints" + suffix] = res.joints_track_m.astype(np.float32)

@@ -107,13 +107,7 @@ def gated_forward_pass(kf, meas, n, first=None, max_rejected_run=2, gate=16.0):
                               cy - 2.0 * k1 * by + k1 * k1 * (ay + ry))
         states.append((px, vx, py, vy))
         covs.append((ax, bx, cx, ay, by, cy))
-    xs = np.array(states, float).reshape(n, 4)
-    c = np.array(covs, float).reshape(n, 6)
-    Ps = np.zeros((n, 4, 4))
-    for o, j in ((0, 0), (2, 3)):
-        Ps[:, o, o], Ps[:, o, o + 1], Ps[:, o + 1, o + 1] = c[:, j], c[:, j + 1], c[:, j + 2]
-        Ps[:, o + 1, o] = c[:, j + 1]
-    return xs, Ps, loglik
+    return np.array(states, float).reshape(n, 4), _covariance_blocks(np.array(covs, float).reshape(n, 6)), loglik
 
 
 def rts_backward(xs, Ps, F, Q):
@@ -203,15 +197,13 @@ def _rts_pair(x, P, a, K, B, i, j):
     P[:, i, i], P[:, i, j], P[:, j, i], P[:, j, j] = ps, qs, qs, rs
 
 
-
-
 def _covariance_blocks(c):
-    """``(n, 4, 4)`` covariances from the per-axis triples ``c`` (n, 6): ``(a, b, c)`` of x, then of y."""
-    n = len(c)
-    Ps = np.zeros((n, 4, 4))
+    """``(..., 4, 4)`` covariances from the per-axis triples ``c`` (..., 6): ``(a, b, c)`` of x,
+    then of y."""
+    Ps = np.zeros(c.shape[:-1] + (4, 4))
     for o, j in ((0, 0), (2, 3)):
-        Ps[:, o, o], Ps[:, o, o + 1], Ps[:, o + 1, o + 1] = c[:, j], c[:, j + 1], c[:, j + 2]
-        Ps[:, o + 1, o] = c[:, j + 1]
+        Ps[..., o, o], Ps[..., o, o + 1], Ps[..., o + 1, o + 1] = c[..., j], c[..., j + 1], c[..., j + 2]
+        Ps[..., o + 1, o] = c[..., j + 1]
     return Ps
 
 
@@ -311,9 +303,7 @@ def forward_pass_batch(x0, p0, r, dt, q, z, measured, first, max_rejected_run=2,
                                    c2 - 2.0 * k1 * b2 + k1 * k1 * (a2 + ryt))
         states[i] = px, vx, py, vy
         covs[i] = ax, bx, cx, ay, by, cy
-    xs = np.ascontiguousarray(states.transpose(2, 0, 1))
-    Ps = np.stack([_covariance_blocks(covs[:, :, h]) for h in range(H)])
-    return xs, Ps, loglik
+    return np.ascontiguousarray(states.transpose(2, 0, 1)), _covariance_blocks(covs.transpose(2, 0, 1)), loglik
 
 
 def rts_backward_batch(xs, Ps, F, Q):

@@ -21,8 +21,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ..geometry import JOINT_INDEX
-from .kalman import (_pairs_decoupled, forward_pass_batch, gated_forward_pass, rts_backward,  # noqa: F401
-                     rts_backward_batch)
+from .kalman import forward_pass_batch, gated_forward_pass, rts_backward, rts_backward_batch
 
 __all__ = ["GroundTrack", "TrackConfig", "camera_track_config", "cast_ankles", "detect_contacts", "fit_ground_track",
            "fit_ground_tracks", "sagittal_ankle_points", "sagittal_ankle_height", "gate_contacts_by_height",

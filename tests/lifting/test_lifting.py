@@ -530,7 +530,7 @@ def test_rts_backward_equals_filterpys_smoother_on_a_coupled_model():
     from filterpy.common import Q_discrete_white_noise
     from filterpy.kalman import KalmanFilter
 
-    from probreg.lifting.trajectory import _pairs_decoupled, rts_backward
+    from probreg.lifting.kalman import _pairs_decoupled, rts_backward
 
     rng = np.random.default_rng(5)
     dt, n = 0.04, 120
