@@ -230,6 +230,18 @@ def _profile_centroids(prof, offs, min_contrast, line_id=None, along=None, crowd
     """
     n_side = 2
     N, M = prof.shape
+    if crowded is not None:
+        crowded = np.asarray(crowded, bool)
+        if not crowded.all():
+            # most profiles have no neighbouring line: their centroids take the short path, the
+            # crowded ones (whole lines: their line_id and along go with them) the full one
+            off, ok = _single_peak_centroids(prof, offs, min_contrast)
+            if crowded.any():
+                c = np.flatnonzero(crowded)
+                off[c], ok[c] = _profile_centroids(prof[c], offs, min_contrast,
+                                                   None if line_id is None else np.asarray(line_id)[c],
+                                                   None if along is None else np.asarray(along)[c])
+            return off, ok
     cols = np.arange(M)[None, :]
     # local maxima (the first sample of a flat top, as argmax takes it) and their prominence
     is_max = np.zeros(prof.shape, bool)
@@ -290,6 +302,16 @@ def _profile_centroids(prof, offs, min_contrast, line_id=None, along=None, crowd
                           & (low_r - np.minimum(outer_l, low_l) <= 0.15 * (top - low_r)))
     left_bg = np.where(has_l, low_l, outer_l)
     right_bg = np.where(has_r, low_r, outer_r)
+    return _stretch_centroids(prof, offs, min_contrast, am, top, left_bg, right_bg, (has_l, has_r, val_l, val_r))
+
+
+def _stretch_centroids(prof, offs, min_contrast, am, top, left_bg, right_bg, valleys=None):
+    """The last step of :func:`_profile_centroids`: the centroid over the stretch around the chosen
+    peak ``am`` (N, 1) at level ``top`` (N, 1) above the backgrounds ``left_bg`` and ``right_bg``
+    (N, 1), and whether it saw a line.  ``valleys`` ``(has_l, has_r, val_l, val_r)`` stop the
+    stretch at the valley towards a neighbouring line (where ``has_*``)."""
+    M = prof.shape[1]
+    cols = np.arange(M)[None, :]
     base = np.where(cols < am, left_bg, right_bg)
     peak = (top - np.minimum(left_bg, right_bg))[:, 0]
     # weights ~ line coverage on both sides: normalise by the contrast on each side
@@ -297,13 +319,34 @@ def _profile_centroids(prof, offs, min_contrast, line_id=None, along=None, crowd
     low = wts <= 0.15 * peak[:, None]
     left = np.where(low & (cols < am), cols, -1).max(1) - 1
     right = np.where(low & (cols > am), cols, M).min(1) + 1
-    left = np.where(has_l[:, 0], np.maximum(left, val_l[:, 0] - 1), left)
-    right = np.where(has_r[:, 0], np.minimum(right, val_r[:, 0] + 1), right)
+    if valleys is not None:
+        has_l, has_r, val_l, val_r = valleys
+        left = np.where(has_l[:, 0], np.maximum(left, val_l[:, 0] - 1), left)
+        right = np.where(has_r[:, 0], np.minimum(right, val_r[:, 0] + 1), right)
     wts = np.where((cols > left[:, None]) & (cols < right[:, None]), wts, 0.0)
     with np.errstate(invalid="ignore", divide="ignore"):
         off = (wts * offs).sum(1) / wts.sum(1)
     ok = (peak > min_contrast) & (left >= 0) & (right <= M - 1) & np.isfinite(off)
     return off, ok
+
+
+def _single_peak_centroids(prof, offs, min_contrast, n_side=2):
+    """:func:`_profile_centroids` of profiles (N, M) none of which is ``crowded``: the brightest
+    sample is the peak, each side's background its outer ``n_side`` samples.  The same numbers, to
+    the bit, as the full function gives those rows (the same operations on them, without the
+    neighbours' search that a profile with one line never uses).
+
+    >>> prof = np.array([[10, 10, 10, 60, 110, 60, 10, 10.0], [10, 10, 60, 110, 60, 10, 10, 10.0]])
+    >>> offs = np.arange(8.0) - 4
+    >>> [a.tolist() for a in _single_peak_centroids(prof, offs, 20)]
+    [[0.0, -1.0], [True, True]]
+    >>> all(np.array_equal(a, b) for a, b in zip(_single_peak_centroids(prof, offs, 20),
+    ...                                          _profile_centroids(prof, offs, 20)))
+    True
+    """
+    am = np.argmax(prof, axis=1)[:, None]
+    outer_l, outer_r = prof[:, :n_side].mean(1)[:, None], prof[:, -n_side:].mean(1)[:, None]
+    return _stretch_centroids(prof, offs, min_contrast, am, np.take_along_axis(prof, am, 1), outer_l, outer_r)
 
 
 def _median(x):

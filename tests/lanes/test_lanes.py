@@ -495,6 +495,45 @@ def test_a_line_next_to_a_darker_surface_is_centred_on_itself():
     assert ok.all() and np.allclose(off + shifts, 5.0, atol=0.1)
 
 
+def test_profiles_of_lone_lines_take_the_short_path_with_the_same_numbers():
+    """A profile of a line without a near-parallel neighbour skips the neighbours' search
+    (``_single_peak_centroids``).  Where that search finds nothing (one clear line in the profile)
+    the full function gives the same offsets and flags to the bit: blurred lines at random
+    sub-pixel centres and widths, side backgrounds a few grey levels apart (track and infield),
+    with noise, clear lines and lines too faint for the threshold.  A mixed call routes a
+    crowded line through the full path."""
+    from probreg.lanes.measure import _profile_centroids, _single_peak_centroids
+
+    rng = np.random.default_rng(3)
+    offs = np.arange(-10.0, 11.0)
+    n = 600
+    centre = rng.uniform(-4, 4, n)
+    width = rng.uniform(0.6, 1.6, n)
+    contrast = np.where(np.arange(n) < 500, rng.uniform(30, 80, n), rng.uniform(3, 8, n))
+    left_bg = rng.uniform(60, 110, n)
+    right_bg = left_bg + rng.uniform(-8, 8, n)
+    x = offs[None, :] - centre[:, None]
+    prof = (np.where(x < 0, left_bg[:, None], right_bg[:, None])
+            + contrast[:, None] * np.exp(-0.5 * (x / width[:, None]) ** 2) + rng.normal(0, 0.5, (n, 21)))
+    prof = prof.astype(np.float32)  # as the luma gather gives them
+    short = _single_peak_centroids(prof, offs, 20.0)
+    full = _profile_centroids(prof, offs, 20.0)  # every profile searched for neighbours
+    assert np.array_equal(short[1], full[1])
+    assert np.array_equal(short[0][:500], full[0][:500])  # (a faint profile's offset is never used)
+    assert short[1][:500].all() and not short[1][500:].any()  # clear lines found, faint ones refused
+    assert np.abs(short[0][:500] - centre[:500]).max() < 0.3  # and centred (the step pulls a little)
+    # mixed: lines 0 and 1 alone, line 2 crowded (its profiles hold a second line 8 px away)
+    line_id = np.repeat([0, 1, 2], 200)
+    prof2 = prof.copy()
+    prof2[400:] += (60 * np.exp(-0.5 * ((x[400:] - 8.0) / 0.8) ** 2)).astype(np.float32)
+    crowded = line_id == 2
+    off, ok = _profile_centroids(prof2, offs, 20.0, line_id=line_id, along=np.arange(n, dtype=float),
+                                 crowded=crowded)
+    alone = _profile_centroids(prof2[400:], offs, 20.0, line_id=line_id[400:], along=np.arange(400.0, n))
+    assert np.array_equal(off[:400], short[0][:400], equal_nan=True) and np.array_equal(ok[:400], short[1][:400])
+    assert np.array_equal(off[400:], alone[0], equal_nan=True) and np.array_equal(ok[400:], alone[1])
+
+
 def test_a_straight_edge_off_the_lanes_comb_is_left_out():
     """A bright straight edge 250 px above the lanes, through their vanishing point (the
     infield's far edge of a grazing view), joins the pencil; the equally spaced comb does not
