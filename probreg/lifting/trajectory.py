@@ -263,23 +263,6 @@ def detect_contacts(ankles_m, fps, config: TrackConfig = TrackConfig(), camera_x
     return out
 
 
-def _contact_points(ankles_m, contacts):
-    pts = []
-    for s in (0, 1):
-        c = contacts[:, s]
-        edges = np.diff(np.concatenate([[0], c.astype(int), [0]]))
-        for a, b in zip(np.flatnonzero(edges == 1), np.flatnonzero(edges == -1)):
-            # the first half of the contact is foot-flat; later the heel rises and the
-            # raised ankle, cast onto the ankle-height plane, lands beyond the foot
-            run = ankles_m[a:a + max(1, (b - a + 1) // 2), s, :2]
-            ok = np.all(np.isfinite(run), -1)
-            if ok.any():
-                x, y = np.median(run[ok], axis=0)
-                pts.append(((a + b - 1) / 2, s, x, y))
-    pts.sort()
-    return np.array(pts, float).reshape(-1, 4)
-
-
 def fit_ground_track(cameras, keypoints_px, fps, ankle_height_m=0.07, config: TrackConfig = TrackConfig(),
                      contacts=None):
     """Contacts and the Kalman/RTS-smoothed ground track of the athlete.
@@ -421,7 +404,7 @@ def _track_setup(ankles, contacts, fps, config, cps=None):
     and fixed contact flags (``cps``: their contact points when known): a :class:`_TrackSetup`,
     or the finished all-NaN :class:`GroundTrack` when there is nothing to measure."""
     F = len(ankles)
-    cps = _contact_points(ankles, contacts) if cps is None else cps
+    cps = _contact_points_many([ankles], contacts)[0] if cps is None else cps
     if len(cps) >= 3:
         # athletes keep to their lane: a "contact" far off the clip's median lateral position
         # is a swinging foot cast beyond the athlete, not a footprint
@@ -537,13 +520,16 @@ def fit_ground_tracks(cameras, keypoints_px, fps, contacts, configs=None, ankle_
 
 
 def _contact_points_many(ankles, contacts):
-    """:func:`_contact_points` of several hypotheses' cast ankles (a list of (F, 2, 3)) under the
-    same contact flags: a list of (K_h, 4), each exactly as that function gives it."""
+    """The footprints of several hypotheses' cast ankles (a list of (F, 2, 3)) under the same
+    contact flags (F, 2): a list of (K_h, 4) arrays ``(run centre frame, side, x, y)`` in the order
+    of the centres, one row per contact run with a finite ankle.  Each footprint is the median of
+    the run's first half (the foot-flat part: later the heel rises, and the raised ankle, cast onto
+    the ankle-height plane, lands beyond the foot), over its frames with a finite ankle."""
     runs = []
     for s in (0, 1):
         for a, b in _runs(contacts[:, s]):
             runs.append(((a + b - 1) / 2, s, a, a + max(1, (b - a + 1) // 2)))
-    runs.sort()  # the order _contact_points sorts its points in (no two runs share a centre and a side)
+    runs.sort()  # by centre, then side (no two runs share both)
     feet = np.stack([np.asarray(a, float)[..., :2] for a in ankles]) if ankles else np.zeros((0, 0, 2, 2))
     pts = [[] for _ in ankles]
     for centre, s, lo, hi in runs:

@@ -629,7 +629,7 @@ def test_fit_ground_tracks_equals_fit_ground_track_to_the_bit(strides):
     with no feet at all."""
     from dataclasses import replace
 
-    from probreg.lifting import fit_ground_tracks
+    from probreg.lifting import cast_ankles, fit_ground_tracks
     from probreg.lifting.trajectory import TrackConfig
 
     clip, gt, j2 = strides
@@ -663,6 +663,17 @@ def test_fit_ground_tracks_equals_fit_ground_track_to_the_bit(strides):
     batch = fit_ground_tracks(cams, kps, clip.fps, contacts, cfgs)
     assert {t.status for t in single} == {"ok", "few_contacts", "no_feet"}
     assert all(_same_track(a, b) for a, b in zip(single, batch))
+    # the footprints against their definition: the median of each contact run's first half
+    feet = cast_ankles(cams[1], kps[1], 0.07)
+    ref = []
+    for s in (0, 1):
+        e = np.diff(np.concatenate([[0], contacts[:, s].astype(int), [0]]))
+        for a, b in zip(np.flatnonzero(e == 1), np.flatnonzero(e == -1)):
+            run = feet[a:a + max(1, (b - a + 1) // 2), s, :2]
+            run = run[np.all(np.isfinite(run), -1)]
+            if len(run):
+                ref.append(((a + b - 1) / 2, s, *np.median(run, axis=0)))
+    assert len(ref) >= 4 and np.allclose(single[1].contact_points_m, sorted(ref), rtol=0, atol=1e-12)
     # the gate and the restarts did act: without restarts the tight fits come out otherwise
     stuck = fit_ground_tracks(cams[:12], kps[:12], clip.fps, contacts,
                               [replace(g, max_rejected_run=10**6) for g in cfgs[:12]])
