@@ -162,8 +162,10 @@ class GroundTruth:
 
 
 def _read_json(path: Path):
+    """A JSON document of the clip or of the user (UTF-8, with or without the byte-order mark
+    some Windows editors put first), or a :class:`ClipFormatError` that names the file."""
     try:
-        with open(path, encoding="utf-8") as fh:
+        with open(path, encoding="utf-8-sig") as fh:
             return json.load(fh)
     except FileNotFoundError:
         raise ClipFormatError(f"{path}: file not found") from None
@@ -299,7 +301,7 @@ def write_keypoints_json(path, keypoints_px, fmt="h36m17", written_by=None):
 def written_by_detect(path):
     """Whether ``path`` is a keypoints file ``probreg detect`` wrote (it may replace it)."""
     try:
-        doc = json.loads(Path(path).read_text(encoding="utf-8"))
+        doc = json.loads(Path(path).read_text(encoding="utf-8-sig"))
     except (OSError, ValueError):
         return False
     return isinstance(doc, dict) and str(doc.get("written_by", "")).startswith("probreg detect")

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry import COCO_NAMES, JOINT_NAMES, coco_to_h36m
-from .clip import ClipFormatError
+from .clip import ClipFormatError, _read_json as _load_json
 
 __all__ = ["read_keypoints", "read_coco_results", "read_openpose_folder", "read_keypoint_csv",
            "read_keypoint_array", "read_trc", "FORMATS", "BODY25_TO_COCO", "COCO18_TO_COCO"]
@@ -44,15 +44,6 @@ def _finish(kp_coco_or_h36m, layout, min_score):
     if layout == "coco17":
         kp = coco_to_h36m(kp)
     return kp
-
-
-def _load_json(path):
-    try:
-        return json.loads(Path(path).read_text(encoding="utf-8"))
-    except FileNotFoundError:
-        raise ClipFormatError(f"{path}: file not found") from None
-    except json.JSONDecodeError as exc:
-        raise ClipFormatError(f"{path}: malformed JSON at line {exc.lineno}: {exc.msg}") from None
 
 
 def read_coco_results(path, min_score=0.3):
@@ -230,7 +221,7 @@ def read_trc(path, min_score=0.3, image_height=None):
     """
     path = Path(path)
     try:
-        lines = path.read_text(encoding="utf-8").splitlines()
+        lines = path.read_text(encoding="utf-8-sig").splitlines()
     except FileNotFoundError:
         raise ClipFormatError(f"{path}: file not found") from None
     if len(lines) < 6 or not lines[0].startswith("PathFileType"):

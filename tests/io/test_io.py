@@ -73,6 +73,30 @@ def test_missing_and_malformed_clip_json(tmp_path):
         load_clip(d)
 
 
+def test_a_byte_order_mark_is_read_past(tmp_path):
+    """JSON saved by an editor that writes UTF-8 with a byte-order mark first (Notepad,
+    PowerShell) reads as the same document, for the clip and for keypoints given apart."""
+    from probreg.io.keypoints import read_coco_results
+
+    kp = [[float(i), 2.0 * i, 0.9] for i in range(17)]
+    plain = _clip(tmp_path, {"format": "h36m17", "frames": [{"frame": 1, "keypoints": kp}]})
+    marked = tmp_path / "marked"
+    marked.mkdir()
+    for name in ("clip.json", "keypoints2d.json"):
+        (marked / name).write_bytes(b"\xef\xbb\xbf" + (plain / name).read_bytes())
+    a, b = load_clip(plain), load_clip(marked)
+    assert (a.fps, a.image_size, a.n_frames) == (b.fps, b.image_size, b.n_frames) == (50.0, (1920, 1080), 3)
+    assert np.array_equal(a.keypoints_px, b.keypoints_px, equal_nan=True)
+    assert np.allclose(b.keypoints_px[1, 5, :2], [5.0, 10.0]) and np.isnan(b.keypoints_px[0]).all()
+    coco = [{"image_id": 0, "category_id": 1, "score": 0.9, "keypoints": [v for i in range(17) for v in (i, i, 0.9)]}]
+    (tmp_path / "coco.json").write_bytes(b"\xef\xbb\xbf" + json.dumps(coco).encode())
+    assert np.allclose(read_coco_results(tmp_path / "coco.json")[0, 1, :2], [12.0, 12.0])  # r_hip = COCO 12
+    # a mark inside the text is still not JSON
+    (marked / "clip.json").write_bytes(b'{"fps": 50.0, \xef\xbb\xbf"image_size": [1920, 1080]}')
+    with pytest.raises(ClipFormatError, match="malformed JSON"):
+        load_clip(marked)
+
+
 def test_nan_keypoints_are_missing_not_zero(tmp_path):
     kp = [[1.0, 2.0, 0.9]] * 17
     kp[3] = [None, 2.0, 0.9]

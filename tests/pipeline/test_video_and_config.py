@@ -40,6 +40,12 @@ def test_default_config_round_trips_to_the_defaults(tmp_path):
     assert {k.dest for k in CONFIG_KEYS} == set(values)
 
 
+def test_a_config_saved_with_a_byte_order_mark_reads_the_same(tmp_path):
+    p = tmp_path / "probreg.toml"
+    p.write_bytes(b"\xef\xbb\xbf" + "[priors]\nstature_m = 1.62\n".encode())
+    assert read_config(p) == {"stature": 1.62}
+
+
 @pytest.mark.parametrize("text, needle", [
     ("[priors]\nstature_m = 'tall'\n", "[priors] stature_m must be a number"),
     ("[priors]\nheight = 3\n", "unknown key 'height' in [priors]"),
