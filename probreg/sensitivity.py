@@ -45,7 +45,7 @@ import numpy as np
 from .geometry import fov_from_focal
 from .io.clip import write_json
 from .lanes import line_straightness_px, undistort_frame_lanes
-from .io import atomic_output_dir
+from .io import atomic_output_dir, load_clip
 from .pipeline import RunOptions, run_clip
 
 __all__ = ["DistortionStudy", "corner_shift_px", "distortion_study", "lane_straightness_curve", "parse_k1_list",
@@ -287,6 +287,8 @@ def distortion_study(clip_dir, out_dir, k1_values, options: RunOptions = RunOpti
         (missing clip, no lanes, ...) pass through unchanged.
     """
     ks = _checked_k1(k1_values)
+    if Path(clip_dir).is_dir() or not Path(clip_dir).exists():
+        load_clip(clip_dir)  # the clip's input errors before the first of the runs starts
     base = np.zeros(5) if options.dist is None else np.asarray(options.dist, float).reshape(5)
     if reference_k1 is None:
         reference_k1 = (float(base[0]) if options.dist is not None else 0.0 if any(np.isclose(0.0, ks))

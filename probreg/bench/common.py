@@ -77,11 +77,30 @@ def md_table(header, rows, floatfmt="{:.2f}"):
     return "\n".join(lines) + "\n"
 
 
+#: folders of ``shared/data`` (a ``--shared`` path to ``shared`` itself is taken to mean its ``data``)
+SHARED_DATA_PARTS = ("validation", "mocap", "paper_frames")
+
+
 def find_shared_data(explicit=None):
-    """Locate ``shared/data`` (benchmarks only; the package never needs it)."""
-    cands = [explicit] if explicit else []
-    cands += [os.environ.get("PROBREG_SHARED_DATA"), Path.cwd() / "../shared/data",
-              Path(__file__).resolve().parents[3] / "shared/data"]
+    """Locate ``shared/data`` (benchmarks only; the package never needs it): the folder given
+    (``--shared``), else ``$PROBREG_SHARED_DATA``, ``../shared/data`` from the working folder or
+    beside the checkout; ``None`` when none is there.
+
+    Raises
+    ------
+    ValueError
+        When a folder is given and is not there: a benchmark never runs on another folder than
+        the one asked for.
+    """
+    if explicit:
+        path = Path(explicit).expanduser()
+        if not path.is_dir():
+            raise ValueError(f"--shared {explicit}: no such folder (give the path of shared/data)")
+        if not any((path / n).is_dir() for n in SHARED_DATA_PARTS) and (path / "data").is_dir():
+            path = path / "data"
+        return path.resolve()
+    cands = [os.environ.get("PROBREG_SHARED_DATA"), Path.cwd() / "../shared/data",
+             Path(__file__).resolve().parents[3] / "shared/data"]
     for c in cands:
         if c and Path(c).is_dir():
             return Path(c).resolve()

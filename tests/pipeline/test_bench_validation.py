@@ -4,6 +4,7 @@ cameras and limb lengths."""
 import shutil
 
 import numpy as np
+import pytest
 
 from probreg.bench.validation import _true_camera_knee
 from probreg.io.clip import write_keypoints_json
@@ -84,3 +85,27 @@ def test_jittered_copy_moves_only_the_keypoints_and_the_same_way_each_time(small
     assert 0.04 < float(np.std(d[ok])) < 0.06 and np.array_equal(ka[..., 2], k0[..., 2], equal_nan=True)
     assert (a / "frames").resolve() == (small_clip / "frames").resolve()
     assert (a / "clip.json").read_text() == (small_clip / "clip.json").read_text()
+
+
+def test_a_shared_folder_given_is_the_one_used_or_an_error(tmp_path, monkeypatch, capsys):
+    """``--shared`` names the data a benchmark scores on: a folder that is not there is an error
+    (before, another ``shared/data`` found beside the checkout was used in its place without a
+    word), and the ``shared`` folder itself stands for its ``data``."""
+    from probreg.bench.common import find_shared_data
+    from probreg.cli import main
+
+    with pytest.raises(ValueError, match="no such folder"):
+        find_shared_data(tmp_path / "nowhere")
+    (tmp_path / "shared" / "data" / "validation").mkdir(parents=True)
+    assert find_shared_data(tmp_path / "shared") == (tmp_path / "shared" / "data").resolve()
+    assert find_shared_data(tmp_path / "shared" / "data") == (tmp_path / "shared" / "data").resolve()
+    # the environment's folder is not taken when one is given
+    monkeypatch.setenv("PROBREG_SHARED_DATA", str(tmp_path / "shared" / "data"))
+    with pytest.raises(ValueError):
+        find_shared_data(tmp_path / "nowhere")
+    assert find_shared_data() == (tmp_path / "shared" / "data").resolve()
+    code = main(["bench", "validation", "--set", "validation", "--shared", str(tmp_path / "nowhere"),
+                 "--reports", str(tmp_path / "reports")])
+    err = capsys.readouterr().err
+    assert code == 2 and "no such folder" in err and "Traceback" not in err
+    assert not (tmp_path / "reports").exists()

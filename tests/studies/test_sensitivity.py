@@ -71,6 +71,14 @@ def test_bad_k1_lists_are_refused(text):
 
 def test_sensitivity_command_bad_input(tmp_path, capsys):
     assert main(["sensitivity", str(tmp_path / "missing"), "--out", str(tmp_path / "o")]) == 2
-    assert "error" in capsys.readouterr().err
+    cap = capsys.readouterr()
+    assert "clip folder not found" in cap.err and "k1 =" not in cap.out  # refused before the first run
+    assert not (tmp_path / "o").exists() and not list(tmp_path.glob(".o.tmp-*"))
+    bad = tmp_path / "bad"
+    bad.mkdir()
+    (bad / "clip.json").write_text('{"fps": "fast", "image_size": [640, 360]}')
+    assert main(["sensitivity", str(bad), "--out", str(tmp_path / "o")]) == 2
+    cap = capsys.readouterr()
+    assert "clip.json" in cap.err and "'fps'" in cap.err and "k1 =" not in cap.out and not (tmp_path / "o").exists()
     assert main(["sensitivity", str(tmp_path), "--out", str(tmp_path / "o"), "--k1=0,abc"]) == 2
     assert "--k1" in capsys.readouterr().err
