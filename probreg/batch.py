@@ -145,6 +145,10 @@ def read_manifest(path, base_options=None):
                 raise ClipFormatError(f"{path}: line {k}, column 'shot': {value!r} is not longest, all or a number")
             elif dest == "slow_motion" and not 0 < value < float("inf"):
                 raise ClipFormatError(f"{path}: line {k}, column 'slow_motion': {cell!r} is not a positive factor")
+            elif dest == "seed" and value < 0:
+                raise ClipFormatError(f"{path}: line {k}, column 'seed': {cell!r} is not a whole number >= 0")
+            elif dest == "min_score" and not 0 <= value <= 1:
+                raise ClipFormatError(f"{path}: line {k}, column 'min_score': {cell!r} is not a confidence in [0, 1]")
             else:
                 opts[dest] = value
         name = name or (clip.stem if clip.suffix else clip.name)

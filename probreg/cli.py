@@ -184,6 +184,21 @@ def _nonneg_float(text):
     return v
 
 
+def _seed(text):
+    """argparse type of ``--seed``: a whole number >= 0 (NumPy's seeds)."""
+    v = int(text)
+    if v < 0:
+        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text!r}")
+    return v
+
+
+def _score(text):
+    """argparse type of ``--min-score``: a detector confidence in [0, 1]."""
+    if not 0 <= (v := float(text)) <= 1:
+        raise argparse.ArgumentTypeError(f"must be a confidence between 0 and 1, got {text!r}")
+    return v
+
+
 def _shot(text):
     """argparse type of ``--shot``: 'longest', 'all' or a shot's number."""
     from .lanes.shots import is_shot_option
@@ -408,7 +423,7 @@ def _add_run_options(p):
                         "(default), or assume a lens without distortion")
     g.add_argument("--lens-k1-sd", type=float, default=0.15,
                    help="sd of the k1 prior (normal, mean 0, |k1| <= 0.5; default 0.15: broadcast zoom lenses)")
-    g.add_argument("--min-score", type=float, default=0.3)
+    g.add_argument("--min-score", type=_score, default=0.3)
     g.add_argument("--camera-side", choices=("auto", "main", "far"), default="auto",
                    help="side of the track the camera stands on: main (home straight stands, runner goes "
                         "left to right), far (across the infield); auto decides by evidence (default; "
@@ -426,7 +441,7 @@ def _add_run_options(p):
                    help="use a non-empty --out that holds files probreg did not write: they are moved aside "
                         "to OUT.previous-<time>, never deleted (a probreg result is replaced without it)")
     if not any(a.dest == "seed" for a in p._actions):
-        g.add_argument("--seed", type=int, default=0)
+        g.add_argument("--seed", type=_seed, default=0)
     p.add_argument("--config", type=Path, default=None, help="TOML file of options (probreg config writes the default)")
     p.add_argument("--quiet", action="store_true", help="no progress bars or stage messages (warnings stay)")
 
@@ -442,7 +457,7 @@ def build_parser():
     s = sub.add_parser("synth", help="generate a synthetic broadcast clip (or a fixed suite) with ground truth")
     s.add_argument("--out", type=Path, help="output clip folder (suite: parent folder)")
     s.add_argument("--preset", default="default", help="generator preset (see --list)")
-    s.add_argument("--seed", type=int, default=0)
+    s.add_argument("--seed", type=_seed, default=0)
     s.add_argument("--frames", type=int, default=None, help="number of frames (default 250)")
     s.add_argument("--no-images", action="store_true", help="skip rendering frames (keypoints + ground truth only)")
     s.add_argument("--suite", default=None, help="write a fixed clip suite: 'bench' (the benchmark suite) or 'heldout' "
@@ -461,7 +476,7 @@ def build_parser():
     d = sub.add_parser("demo", help="the main job on a built-in default: synthetic clip -> pipeline -> report")
     d.add_argument("--out", type=Path, default=Path("demo_out"))
     d.add_argument("--preset", default="default")
-    d.add_argument("--seed", type=int, default=0)
+    d.add_argument("--seed", type=_seed, default=0)
     d.add_argument("--frames", type=int, default=250)
     d.add_argument("--jobs", type=int, default=None)
     _add_run_options(d)
@@ -521,7 +536,7 @@ def build_parser():
     c.add_argument("--branch", choices=("narrow", "wide"), default="narrow",
                    help="which family member when a height occurs twice (default: zoomed-in)")
     c.add_argument("--no-smooth", action="store_true", help="no temporal smoothing of the vanishing point")
-    c.add_argument("--min-score", type=float, default=0.3, help="keypoints below this score are missing")
+    c.add_argument("--min-score", type=_score, default=0.3, help="keypoints below this score are missing")
     c.add_argument("--camera-side", choices=("auto", "main", "far"), default="auto",
                    help="side of the track the camera stands on (auto: decided by the athlete's motion)")
     c.add_argument("--shot", type=_shot, default="longest", help="with camera cuts: the shot calibrated (as for run)")
@@ -533,7 +548,7 @@ def build_parser():
     lf.add_argument("--cameras", type=Path, required=True, help="camera.json / cameras.json layout of CLIP_FORMAT")
     lf.add_argument("--out", type=Path, required=True)
     lf.add_argument("--segments", type=Path, default=None, help="JSON of segment lengths (m); estimated when absent")
-    lf.add_argument("--min-score", type=float, default=0.3)
+    lf.add_argument("--min-score", type=_score, default=0.3)
     lf.add_argument("--no-smooth", action="store_true", help="no outlier rejection / low-pass of keypoints")
     lf.add_argument("--slow-motion", type=float, default=1.0, metavar="N", help="a replay's slow-down (as in run)")
     lf.add_argument("--overwrite", action="store_true", help="move a non-empty foreign --out aside (never deleted)")
@@ -549,7 +564,7 @@ def build_parser():
     im.add_argument("--frames", type=Path, default=None, help="folder of images, sorted by name")
     im.add_argument("--fps", type=float, default=None)
     im.add_argument("--athlete-lane", type=int, default=None)
-    im.add_argument("--min-score", type=float, default=0.3, help="joints below this score become missing")
+    im.add_argument("--min-score", type=_score, default=0.3, help="joints below this score become missing")
     im.add_argument("--trc-image-height", type=int, default=None, help="flip TRC y (Sports2D writes y up)")
     im.add_argument("--out", type=Path, required=True)
     im.add_argument("--overwrite", action="store_true",
@@ -563,7 +578,7 @@ def build_parser():
     de.add_argument("--det-model", type=Path, default=None, help="YOLO-pose ONNX that finds the person box")
     de.add_argument("--box", default=None, help="athlete's box in the first frame x0,y0,x1,y1")
     de.add_argument("--point", default=None, help="a point on the athlete in the first frame x,y")
-    de.add_argument("--min-score", type=float, default=0.3)
+    de.add_argument("--min-score", type=_score, default=0.3)
     de.add_argument("--overwrite", action="store_true", help="move an --out file probreg did not write aside")
     de.set_defaults(func=_cmd_detect)
 

@@ -155,10 +155,14 @@ def _convert(path, key, value):
             raise ConfigError(f"{where} must be a finite number >= 0, got {value!r}")
         if key.dest == "slow_motion" and not 0 < value < float("inf"):
             raise ConfigError(f"{where} must be a positive factor (4: a quarter of real speed), got {value!r}")
+        if key.dest == "min_score" and not 0 <= value <= 1:
+            raise ConfigError(f"{where} must be a confidence between 0 and 1, got {value!r}")
         return float(value)
     if key.kind is int:
         if isinstance(value, bool) or not isinstance(value, int):
             raise ConfigError(f"{where} must be an integer, got {value!r}")
+        if key.dest == "seed" and value < 0:
+            raise ConfigError(f"{where} must be a whole number >= 0, got {value!r}")
         return value
     if key.kind is str:
         if not isinstance(value, str):

@@ -52,6 +52,8 @@ def test_manifest_paths_are_relative_to_it_and_options_override(tmp_path):
     ("clip,camera_side\nx,left\n", "not auto, main or far"),
     ("clip,shot\nx,first\n", "column 'shot': 'first' is not longest, all or a number"),
     ("clip,slow_motion\nx,0\n", "column 'slow_motion': '0' is not a positive factor"),
+    ("clip,seed\nx,-3\n", "column 'seed': '-3' is not a whole number >= 0"),
+    ("clip,min_score\nx,30\n", "column 'min_score': '30' is not a confidence in [0, 1]"),
     ("clip\n\n,\n", "empty 'clip'"),
 ])
 def test_bad_manifests_name_line_and_column(tmp_path, text, needle, capsys):

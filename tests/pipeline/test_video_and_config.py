@@ -56,6 +56,8 @@ def test_a_config_saved_with_a_byte_order_mark_reads_the_same(tmp_path):
     ("[priors\n", "not valid TOML"),
     ("[priors]\ncamera_height_allowance = -0.1\n", "camera_height_allowance must be a finite number >= 0"),
     ("[camera]\nslow_motion = 0\n", "slow_motion must be a positive factor"),
+    ("[sampler]\nseed = -1\n", "[sampler] seed must be a whole number >= 0"),
+    ("[detection]\nmin_score = 30\n", "[detection] min_score must be a confidence between 0 and 1"),
 ])
 def test_bad_config_names_file_and_key(tmp_path, text, needle, capsys):
     p = tmp_path / "c.toml"
@@ -66,6 +68,17 @@ def test_bad_config_names_file_and_key(tmp_path, text, needle, capsys):
     assert main(["run", "x", "--out", str(tmp_path / "o"), "--config", str(p)]) == 2
     err = capsys.readouterr().err
     assert needle in err and "Traceback" not in err
+
+
+@pytest.mark.parametrize("flag, needle", [
+    (["--seed", "-1"], "argument --seed: must be a whole number >= 0, got '-1'"),
+    (["--min-score", "30"], "argument --min-score: must be a confidence between 0 and 1, got '30'"),
+])
+def test_flags_out_of_range_are_named_before_anything_runs(tmp_path, flag, needle, capsys):
+    with pytest.raises(SystemExit) as exc:
+        main(["run", str(tmp_path), "--out", str(tmp_path / "o"), *flag])
+    err = capsys.readouterr().err
+    assert exc.value.code == 2 and needle in err and not (tmp_path / "o").exists()
 
 
 def test_flags_override_the_config_which_overrides_the_defaults(tmp_path, monkeypatch):
