@@ -42,12 +42,15 @@ def _cmd_synth(args):
 
     if args.list:
         print("presets:", ", ".join(sorted(PRESETS)))
-        print("suites:", ", ".join(f"{k} ({len(v)} clips)" for k, v in sorted(SUITES.items())))
+        print("suites:", ", ".join(f"{k} ({len(v)} clips)" for k, v in sorted(SUITES.items())),
+              "and heldout (40 randomised set-ups, seeds fixed; never tuned on)")
         return 0
     if args.out is None:
         raise CliError("--out DIR is required")
     if args.frames is not None and args.frames < 1:
         raise CliError("--frames must be at least 1")
+    if args.suite and args.suite != "heldout" and args.suite not in SUITES:
+        raise CliError(f"unknown suite {args.suite!r}; choose from {', '.join(sorted(SUITES) + ['heldout'])}")
     _prepare_out(args.out, overwrite=args.overwrite)
     if args.suite == "heldout":
         from .sim.heldout import write_heldout

@@ -159,6 +159,8 @@ def test_cli_synth_no_images_and_errors(tmp_path, capsys):
     assert main(["synth", "--out", str(tmp_path / "bad"), "--camera-height", "-1"]) == 2
     assert main(["synth", "--out", str(tmp_path / "bad"), "--rail", "-0.5"]) == 2
     assert "rail_frac" in capsys.readouterr().err
+    assert main(["synth", "--out", str(tmp_path / "bad"), "--suite", "held-out"]) == 2
+    assert "unknown suite 'held-out'; choose from bench, lens, lens_heldout, mini, heldout" in capsys.readouterr().err
     assert not (tmp_path / "bad").exists()
     rail = tmp_path / "rail"  # a camera on a rail: its centre moves along the track
     assert main(["synth", "--out", str(rail), "--seed", "3", "--frames", "12", "--no-images", "--rail", "0.5"]) == 0
