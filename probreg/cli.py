@@ -56,16 +56,13 @@ def _cmd_synth(args):
         from .sim.heldout import write_heldout
 
         paths = write_heldout(args.out, n_frames=args.frames or 100, jobs=args.jobs, overwrite=args.overwrite)
-        print(f"wrote {len(paths)} held-out clips under {args.out}")
-        return 0
-    if args.suite:
+    elif args.suite:
         paths = write_suite(args.suite, args.out, images=not args.no_images, n_frames=args.frames,
                             jobs=args.jobs, overwrite=args.overwrite)
-        print(f"wrote {len(paths)} clips under {args.out}")
+    if args.suite:
+        print(f"wrote {len(paths)} {'held-out ' if args.suite == 'heldout' else ''}clips under {args.out}")
         return 0
-    overrides = {}
-    if args.style:
-        overrides["style"] = args.style
+    overrides = {"style": args.style} if args.style else {}
     cam_kw = {k: v for k, v in (("height_m", args.camera_height), ("distance_m", args.distance),
                                 ("rail_frac", args.rail)) if v is not None}
     if args.fov is not None:
@@ -180,26 +177,19 @@ def _cmd_demo(args):
     return _verdict_exit(res)
 
 
-def _nonneg_float(text):
-    """argparse type: a finite number >= 0 (not a number at all: argparse's 'invalid value')."""
-    if not 0 <= (v := float(text)) < float("inf"):
-        raise argparse.ArgumentTypeError(f"must be a finite number >= 0, got {text!r}")
-    return v
+def _checked(kind, ok, what):
+    """An argparse type: ``kind(text)`` for which ``ok`` holds, else an error saying it must be ``what``."""
+    def parse(text):
+        if not ok(v := kind(text)):
+            raise argparse.ArgumentTypeError(f"must be {what}, got {text!r}")
+        return v
+    parse.__name__ = kind.__name__  # argparse's own message for a non-number: "invalid float value"
+    return parse
 
 
-def _seed(text):
-    """argparse type of ``--seed``: a whole number >= 0 (NumPy's seeds)."""
-    v = int(text)
-    if v < 0:
-        raise argparse.ArgumentTypeError(f"must be a whole number >= 0, got {text!r}")
-    return v
-
-
-def _score(text):
-    """argparse type of ``--min-score``: a detector confidence in [0, 1]."""
-    if not 0 <= (v := float(text)) <= 1:
-        raise argparse.ArgumentTypeError(f"must be a confidence between 0 and 1, got {text!r}")
-    return v
+_nonneg_float = _checked(float, lambda v: 0 <= v < float("inf"), "a finite number >= 0")
+_seed = _checked(int, lambda v: v >= 0, "a whole number >= 0")  # NumPy's seeds
+_score = _checked(float, lambda v: 0 <= v <= 1, "a confidence between 0 and 1")  # --min-score
 
 
 def _shot(text):

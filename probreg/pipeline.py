@@ -215,6 +215,16 @@ def _copy_extra(tmp, extra_files):
         (tmp / name).write_bytes(Path(src).read_bytes())
 
 
+def _on_athlete(reg):
+    """``run.json``'s ``diagnostics.keypoints_on_athlete``: the median over the shot's frames of
+    :func:`probreg.lanes.on_athlete_fraction` (the lane step measures it), and how many frames
+    had an image and a pose to measure it on."""
+    lo, hi = reg.shots.frames
+    v = np.array([fl.extra.get("on_athlete", np.nan) for fl in reg.frame_lanes[lo:hi]], float)
+    v = v[np.isfinite(v)]
+    return {"median": float(np.median(v)) if len(v) else float("nan"), "frames": int(len(v))}
+
+
 def _write_uncalibrated(clip, reg, side, out_dir, options, error, t0, log, inputs, extra_files=None):
     """The result folder of a clip no frame of which calibrates: every file of the layout, with
     NaN angles and joints, null cameras, the lane status of every frame and the verdict
@@ -465,6 +475,7 @@ def _run_clip(clip_dir, out_dir, options, log, protect, extra_files):
     diag["cadence_stride_pattern_spm"] = pattern_cadence_spm(model.stride_frames(), clip.fps)  # gait_check's
     diag["left_right_exchanged"] = exchanged = {"legs": float(model.exchanged[:, 0].mean())}  # the arms: never
     diag["leg_image_px"] = legs_px = limb_image_length(model.kp)  # thighs and shanks: long enough to read?
+    diag["keypoints_on_athlete"] = on_athlete = _on_athlete(reg)  # are the keypoints on these images' athlete?
     verdict, reasons = clip_verdict(  # over the frames of the shot estimated (all but with --shot all)
         reg.shots.frames[1] - reg.shots.frames[0], calibrated=sum(c is not None for c in cam_list),
         frames_with_angles=n_angle, cuts=reg.shots.cuts if reg.shots.chosen is None else None,
@@ -475,7 +486,7 @@ def _run_clip(clip_dir, out_dir, options, log, protect, extra_files):
         member_sensitivity=sensitivity, lanes_agree=agree, noise_rho=model.noise_rho,
         knee_band_deg=knee_band_width(summ), obliquity_deg=obliquity, knee_peak_deg=knee_peak,
         left_right_exchanged=exchanged, time_base=time_base, lens_conflict=diag.get("given_lens"),
-        limb_px=legs_px, noise_px=model.noise_sd, fps=clip.fps)
+        limb_px=legs_px, noise_px=model.noise_sd, fps=clip.fps, on_athlete=on_athlete["median"])
     result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
                        gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
                        verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,

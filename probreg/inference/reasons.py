@@ -103,6 +103,15 @@ REASON_HELP = {
          "directions, and every angle, are noise"),
         "check that the keypoints are in the frames' pixels (not a crop's or a smaller copy's); use a closer view",
     ),
+    "keypoints off the athlete": (
+        ("the 2D skeleton does not lie on a person in the frames: along its bones the image looks like "
+         "the track around it.  The keypoints belong to other images (a pose model run on a resized, "
+         "cropped or padded copy; another clip), and the camera and every angle built on them are "
+         "meaningless however narrow their bands"),
+        ("give keypoints in these frames' pixels (run the pose model on the frames themselves: "
+         "probreg detect; or rescale its coordinates to clip.json's image_size); the report's overlay "
+         "shows where the skeleton lies"),
+    ),
     "left/right labels unsure": (
         ("the 2D detector often called the left leg right: probreg set the labels right from the "
          "motion, but which leg is the left one is close to a guess"),

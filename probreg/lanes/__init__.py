@@ -6,7 +6,7 @@ line indices.  The frames' colour changes and the shots between camera cuts are 
 """
 
 from .detection import detect_lanes
-from .mask import athlete_mask
+from .mask import athlete_mask, on_athlete_fraction
 from .overlay import draw_lanes
 from .shots import ShotSplit, colour_histogram, find_cuts, histogram_change, split_shots
 from .tracking import track_lanes
@@ -15,7 +15,7 @@ from .undistort import line_straightness_px, undistort_frame_lanes
 from .vanishing import assign_line_indices, lines_through_point, smooth_vanishing_points
 
 __all__ = [
-    "LaneDetectorConfig", "LaneLine", "FrameLanes", "STATUSES", "athlete_mask",
+    "LaneDetectorConfig", "LaneLine", "FrameLanes", "STATUSES", "athlete_mask", "on_athlete_fraction",
     "lines_through_point", "assign_line_indices", "smooth_vanishing_points", "track_lanes",
     "undistort_frame_lanes", "line_straightness_px", "draw_lanes", "detect_lanes",
     "ShotSplit", "colour_histogram", "histogram_change", "find_cuts", "split_shots",

@@ -6,7 +6,7 @@ import numpy as np
 
 from ..geometry import BONES, JOINT_INDEX
 
-__all__ = ["athlete_mask"]
+__all__ = ["athlete_mask", "on_athlete_fraction"]
 
 
 #: Joint pairs whose 2-D segments outline the athlete for :func:`athlete_mask`: the skeleton's
@@ -52,6 +52,85 @@ def athlete_mask(keypoints_px, radius_frac=0.12, margin_px=4.0):
         return None
     caps = np.array(caps, float)
     return np.column_stack([caps, np.full(len(caps), radius_frac * extent + margin_px)])
+
+
+#: the skeleton's bones as joint index pairs (the points :func:`on_athlete_fraction` looks at)
+_BONE_INDEX = np.array([(JOINT_INDEX[a], JOINT_INDEX[b]) for a, b in BONES])
+
+
+def on_athlete_fraction(image, keypoints_px, bone_points=8, ring_points=128, ring_margin=0.35,
+                        min_distance=8.0):
+    """Whether one frame's 2-D keypoints lie on a person in its image: the share of points along
+    the skeleton's bones whose colour is unlike every colour around the skeleton.
+
+    Keypoints found on the frames themselves put most points of their bones on the athlete's
+    body, whose kit, skin and shoes differ from the track, the lines and the grass around it.
+    Keypoints that belong to other images (a pose model run on a resized or cropped copy, another
+    clip, coordinates in the wrong unit) put their bones on whatever lies there, which looks like
+    its surroundings.  The surroundings are sampled on an ellipse around the skeleton's box,
+    ``ring_margin`` of its extent outside it; a bone point is *unlike* them when its colour is
+    farther from every ring colour than 90 % of the ring's points are from their nearest other ring
+    point (and at least ``min_distance`` grey levels, BGR Euclidean).  So on plain surroundings
+    about a tenth of the points of a skeleton that lies on no person count as unlike; on the
+    validation clips and on probreg's own, 0.97-1.0 of those of the clip's own keypoints do, and
+    0.0-0.18 once the keypoints are scaled by 0.5-2 about the image corner
+    (``docs/method.md``, "Keypoints that belong to other images").
+
+    Parameters
+    ----------
+    image : ndarray (H, W, 3) uint8 or None
+    keypoints_px : array_like (17, 2 or 3)
+        H36M-17 keypoints of the frame, NaN where missing.
+
+    Returns
+    -------
+    float
+        In [0, 1] (bone points off the image count as lying on nothing unlike the track: an
+        athlete half out of the frame scores at most a half there); NaN when the frame has no
+        image or fewer than 8 joints, or too little of the ring lies inside the image.
+
+    >>> img = np.full((200, 200, 3), (40, 60, 160), np.uint8)  # a red track
+    >>> kp = np.full((17, 2), np.nan)
+    >>> kp[_BONE_INDEX[:, 0]] = [100, 60]; kp[_BONE_INDEX[:, 1]] = [100, 140]  # every bone on x = 100
+    >>> img[50:150, 95:106] = (200, 180, 20)  # a body in a blue kit along them
+    >>> on_athlete_fraction(img, kp), on_athlete_fraction(img, kp + [40, 0])
+    (1.0, 0.0)
+    """
+    if image is None or getattr(image, "ndim", 0) != 3 or image.size == 0:
+        return float("nan")
+    kp = np.asarray(keypoints_px, float)[:, :2]
+    seen = np.isfinite(kp).all(axis=1)
+    bones = _BONE_INDEX[seen[_BONE_INDEX].all(axis=1)]
+    if seen.sum() < 8 or len(bones) == 0:
+        return float("nan")
+    t = (np.arange(bone_points) + 0.5) / bone_points
+    a, b = kp[bones[:, 0]], kp[bones[:, 1]]
+    body = (a[:, None] + (b - a)[:, None] * t[None, :, None]).reshape(-1, 2)
+    lo, hi = kp[seen].min(axis=0), kp[seen].max(axis=0)
+    half = (hi - lo) / 2 + ring_margin * float(np.max(hi - lo))
+    th = np.linspace(0.0, 2 * np.pi, ring_points, endpoint=False)
+    ring = (lo + hi) / 2 + half * np.column_stack([np.cos(th), np.sin(th)])
+    h, w = image.shape[:2]
+
+    def colours(points):
+        p = np.round(points).astype(np.int64)
+        keep = (p[:, 0] >= 0) & (p[:, 0] < w) & (p[:, 1] >= 0) & (p[:, 1] < h)
+        return image[p[keep, 1], p[keep, 0]].astype(np.float64)
+
+    n_body = len(body)
+    body, ring = colours(body), colours(ring)
+    if len(body) == 0:
+        return 0.0  # the whole skeleton lies off the image: on nothing it shows
+    if len(ring) < ring_points // 8:
+        return float("nan")
+    # squared colour distances through one product each (a few hundred points: ~0.1 ms a frame)
+    r2 = np.einsum("ij,ij->i", ring, ring)
+    d_ring = r2[:, None] + r2[None] - 2.0 * (ring @ ring.T)
+    np.fill_diagonal(d_ring, np.inf)
+    nearest = np.sort(d_ring.min(axis=1))
+    tau2 = max(float(nearest[int(round(0.9 * (len(nearest) - 1)))]), min_distance**2)  # the 90th percentile
+    d_body = (np.einsum("ij,ij->i", body, body)[:, None] + r2[None] - 2.0 * (body @ ring.T)).min(axis=1)
+    return float(np.sum(d_body > tau2) / n_body)  # a point off the image lies on nothing it shows
 
 
 def _near_capsules(points, capsules, reach):

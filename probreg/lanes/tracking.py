@@ -19,7 +19,7 @@ from .detection import (
     _pencil_from_candidates,
     detect_lanes,
 )
-from .mask import athlete_mask
+from .mask import athlete_mask, on_athlete_fraction
 from .shots import colour_histogram, histogram_change
 from .types import FrameLanes, LaneDetectorConfig
 
@@ -53,7 +53,9 @@ def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypo
     list of FrameLanes
         Each with ``extra["colour_change"]``: the change of the frame's colour distribution from
         the previous frame's (:func:`probreg.lanes.shots.histogram_change`; NaN for the first
-        frame and next to an unreadable one), the evidence for camera cuts.
+        frame and next to an unreadable one), the evidence for camera cuts.  With ``keypoints_px``, also
+        ``extra["on_athlete"]``: :func:`on_athlete_fraction` of the frame's keypoints (NaN without
+        an image or a pose), the evidence that the keypoints belong to these images.
     """
     out = []
     prev = last_ok = None
@@ -113,7 +115,10 @@ def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypo
             ref = prev if prev is not None else last_ok
             fl, next_id = _assign_track_ids(fl, ref, next_id, shift if ref is prev else np.zeros(2))
             last_ok = fl
-        out.append(replace(fl, extra={**fl.extra, "colour_change": histogram_change(prev_hist, hist)}))
+        extra = {**fl.extra, "colour_change": histogram_change(prev_hist, hist)}
+        if keypoints_px is not None and 0 <= i < len(keypoints_px):  # do the keypoints lie on the athlete?
+            extra["on_athlete"] = on_athlete_fraction(img, keypoints_px[i])
+        out.append(replace(fl, extra=extra))
         prev = fl if fl.ok else None
         prev_small, prev_hist = small, hist
     return out

@@ -596,3 +596,32 @@ def test_far_lines_a_grazing_camera_cannot_resolve_are_left_out(tmp_path, monkey
     monkeypatch.setattr(detection, "_off_comb",
                         lambda *a, _f=detection._off_comb: _f(*a[:4], frac=0.1))
     assert max(worst_offset_px(i) for i in frames) > 1.5
+
+
+def test_keypoints_lie_on_the_athlete_of_their_own_frames_only(small_clip):
+    """:func:`on_athlete_fraction` on a rendered clip: the clip's own keypoints put nearly every
+    point of the skeleton on the athlete; the same keypoints in the pixels of a half-size or a
+    double-size copy, or 100 px to the side, put it on the track around him (below the verdict's
+    third); a skeleton wholly off the image lies on nothing; no image or too few joints: NaN."""
+    from probreg.io import load_clip
+    from probreg.io.frames import iter_frames
+    from probreg.lanes import on_athlete_fraction
+    from probreg.inference.verdict import VerdictThresholds
+
+    clip = load_clip(small_clip)
+    kp = clip.keypoints_px
+    got = {k: [] for k in ("own", "half", "double", "aside")}
+    for i, img in iter_frames(clip):
+        xy = kp[i, :, :2]
+        for name, moved in (("own", xy), ("half", xy * 0.5), ("double", xy * 2.0), ("aside", xy + [100.0, 0.0])):
+            got[name].append(on_athlete_fraction(img, moved))
+    med = {k: float(np.nanmedian(v)) for k, v in got.items()}
+    limit = VerdictThresholds().min_on_athlete
+    assert med["own"] > 0.9 and min(got["own"]) > 2 * limit, got["own"]
+    assert max(med["half"], med["double"], med["aside"]) < limit / 2, med
+    img = next(iter_frames(clip))[1]
+    assert on_athlete_fraction(img, kp[0, :, :2] + [5000.0, 0.0]) == 0.0
+    assert np.isnan(on_athlete_fraction(None, kp[0]))
+    few = kp[0].copy()
+    few[7:] = np.nan
+    assert np.isnan(on_athlete_fraction(img, few))

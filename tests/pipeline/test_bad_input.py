@@ -256,6 +256,31 @@ def test_joints_all_at_one_pixel_give_a_result_without_numpy_warnings(clip, tmp_
     assert any(r.startswith("legs too short in the image (0.0 px") for r in run["verdict_reasons"]), run
 
 
+def test_keypoints_of_other_images_are_flagged_and_the_clips_own_are_not(clip, tmp_path, capsys):
+    """Keypoints in another image's pixels (a pose model run on a half-size copy of the frames)
+    put the skeleton on bare track: they once gave a confident camera and angles under an ``ok``
+    verdict (a 12.9 m camera read as 19.8 m).  The clip's own keypoints lie on the athlete."""
+    own = tmp_path / "own"
+    assert main(["run", str(clip), "--out", str(own)] + FAST_RUN) == 3  # 40 frames: a short clip
+    run = json.loads((own / "run.json").read_text())
+    assert run["diagnostics"]["keypoints_on_athlete"]["median"] > 0.9
+    assert run["diagnostics"]["keypoints_on_athlete"]["frames"] == 40
+    assert not any(r.startswith("keypoints off the athlete") for r in run["verdict_reasons"])
+    doc = json.loads((clip / "keypoints2d.json").read_text())
+    for f in doc["frames"]:
+        if f["keypoints"]:
+            f["keypoints"] = [[x * 0.5, y * 0.5, s] if x is not None else [x, y, s] for x, y, s in f["keypoints"]]
+    (clip / "keypoints2d.json").write_text(json.dumps(doc))
+    half = tmp_path / "half"
+    code = main(["run", str(clip), "--out", str(half)] + FAST_RUN)
+    err = capsys.readouterr().err
+    run = json.loads((half / "run.json").read_text())
+    assert code == 3 and run["verdict"] == "unreliable" and (half / "angles.csv").exists()
+    assert run["diagnostics"]["keypoints_on_athlete"]["median"] < 0.2
+    assert any(r.startswith("keypoints off the athlete (") for r in run["verdict_reasons"]), run
+    assert "keypoints off the athlete" in err and "Traceback" not in err
+
+
 # ----------------------------------------------------------------------------- 5. metadata
 @pytest.mark.parametrize("fps", ["Infinity", "1e-9", "-50", "\"fifty\"", "true"])
 def test_fps_outside_the_accepted_range_is_a_clear_error(clip, tmp_path, capsys, fps):
