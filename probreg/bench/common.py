@@ -33,6 +33,7 @@ BENCHMARKS = {
     "replays": "probreg.bench.replays:run",
     "rails": "probreg.bench.rails:run",
     "long-clips": "probreg.bench.long_clips:run",
+    "on-athlete": "probreg.bench.on_athlete:run",
 }
 
 
