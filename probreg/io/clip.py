@@ -440,8 +440,13 @@ def load_clip(path, min_score=0.0):
     outside = None
     if (path / "keypoints2d.json").exists():
         kp = read_keypoints_json(path / "keypoints2d.json", n_frames=n)
-        # absurd coordinates (far outside the image) are not detections: treat them as missing
         x, y = kp[..., 0], kp[..., 1]
+        xy = kp[..., :2][np.isfinite(kp[..., :2]).all(axis=-1)]
+        if len(xy) >= 8 and min(w, h) > 8 and np.all((xy >= -0.05) & (xy <= 1.05)):
+            raise ClipFormatError(f"{path / 'keypoints2d.json'}: every keypoint lies within [0, 1] (coordinates "
+                                  f"normalised to the image, as MediaPipe gives them?); CLIP_FORMAT wants pixels of "
+                                  f"the {w}x{h} frames: multiply x by {w} and y by {h}")
+        # absurd coordinates (far outside the image) are not detections: treat them as missing
         with np.errstate(invalid="ignore"):
             far = (x < -w) | (x > 2 * w) | (y < -h) | (y > 2 * h)
         if np.any(far):

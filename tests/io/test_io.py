@@ -97,6 +97,19 @@ def test_a_byte_order_mark_is_read_past(tmp_path):
         load_clip(marked)
 
 
+def test_keypoints_normalised_to_the_image_are_a_clear_error(tmp_path):
+    """x, y in [0, 1] (MediaPipe's normalised landmarks) are not pixels: the error says how to
+    turn them into the frames' pixels; a small athlete's pixel coordinates pass."""
+    kp = [[0.40 + 0.01 * i, 0.30 + 0.02 * i, 0.9] for i in range(17)]
+    d = _clip(tmp_path, {"format": "h36m17", "frames": [{"frame": 0, "keypoints": kp}]})
+    with pytest.raises(ClipFormatError, match=r"within \[0, 1\].*multiply x by 1920 and y by 1080") as exc:
+        load_clip(d)
+    assert "keypoints2d.json" in str(exc.value)
+    (d / "keypoints2d.json").write_text(json.dumps(
+        {"format": "h36m17", "frames": [{"frame": 0, "keypoints": [[x * 1920, y * 1080, c] for x, y, c in kp]}]}))
+    assert np.allclose(load_clip(d).keypoints_px[0, 3, :2], [0.43 * 1920, 0.36 * 1080])
+
+
 def test_nan_keypoints_are_missing_not_zero(tmp_path):
     kp = [[1.0, 2.0, 0.9]] * 17
     kp[3] = [None, 2.0, 0.9]
