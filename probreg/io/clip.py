@@ -176,6 +176,19 @@ def _read_json(path: Path):
         raise ClipFormatError(f"{path}: not UTF-8 text ({exc.reason})") from None
 
 
+def check_pixel_coordinates(keypoints, image_size, where):
+    """Raise :class:`ClipFormatError` when every keypoint of ``keypoints`` (F, 17, 2+) lies within
+    [0, 1]: coordinates normalised to the image (MediaPipe's), not the frames' pixels; the message
+    gives the factors that turn them into pixels."""
+    xy = np.asarray(keypoints, float)[..., :2]
+    xy = xy[np.isfinite(xy).all(axis=-1)]
+    w, h = image_size
+    if len(xy) >= 8 and min(w, h) > 8 and np.all((xy >= -0.05) & (xy <= 1.05)):
+        raise ClipFormatError(f"{where}: every keypoint lies within [0, 1] (coordinates normalised to the image, "
+                              f"as MediaPipe gives them?); CLIP_FORMAT wants pixels of the {w}x{h} frames: "
+                              f"multiply x by {w} and y by {h}")
+
+
 def write_json(path, obj):
     """Write JSON (UTF-8, indented) with NaN/inf written as ``null``."""
 
@@ -441,11 +454,7 @@ def load_clip(path, min_score=0.0):
     if (path / "keypoints2d.json").exists():
         kp = read_keypoints_json(path / "keypoints2d.json", n_frames=n)
         x, y = kp[..., 0], kp[..., 1]
-        xy = kp[..., :2][np.isfinite(kp[..., :2]).all(axis=-1)]
-        if len(xy) >= 8 and min(w, h) > 8 and np.all((xy >= -0.05) & (xy <= 1.05)):
-            raise ClipFormatError(f"{path / 'keypoints2d.json'}: every keypoint lies within [0, 1] (coordinates "
-                                  f"normalised to the image, as MediaPipe gives them?); CLIP_FORMAT wants pixels of "
-                                  f"the {w}x{h} frames: multiply x by {w} and y by {h}")
+        check_pixel_coordinates(kp, (w, h), path / "keypoints2d.json")
         # absurd coordinates (far outside the image) are not detections: treat them as missing
         with np.errstate(invalid="ignore"):
             far = (x < -w) | (x > 2 * w) | (y < -h) | (y > 2 * h)

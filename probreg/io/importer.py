@@ -8,7 +8,7 @@ from pathlib import Path
 
 import numpy as np
 
-from .clip import ClipFormatError, atomic_output_dir, write_json, write_keypoints_json
+from .clip import ClipFormatError, atomic_output_dir, check_pixel_coordinates, write_json, write_keypoints_json
 from .keypoints import read_keypoints
 from .output import prepare_output
 
@@ -68,6 +68,7 @@ def import_clip(out, keypoints, video=None, frames=None, fps=None, fmt=None, lay
             raise ClipFormatError("--fps is required with --frames (a folder of images has no frame rate)")
     if not fps or fps <= 0:
         raise ClipFormatError("the frame rate is unknown: give --fps")
+    check_pixel_coordinates(kp, size, keypoints)
     if len(kp) > n_src:
         raise ClipFormatError(f"{keypoints}: {len(kp)} frames of keypoints but the video has only {n_src}")
     if len(kp) < n_src:

@@ -172,3 +172,20 @@ def test_keypoints2d_json_round_trip_and_a_format_its_names_contradict(tmp_path,
     doc["joint_names"] = [n.upper() for n in COCO_NAMES]
     (tmp_path / "other.json").write_text(json.dumps(doc))
     assert read_keypoints_json(tmp_path / "other.json").shape == (5, 17, 3)
+
+
+def test_import_refuses_keypoints_normalised_to_the_image_before_writing(tmp_path, coco_kp, capsys):
+    """MediaPipe-style landmarks (x, y in [0, 1]) are refused at the import, with the factors that
+    make them pixels of the frames found, and no clip folder is left behind."""
+    frames = tmp_path / "imgs"
+    frames.mkdir()
+    for i in range(6):
+        cv2.imwrite(str(frames / f"img{i:03d}.png"), np.zeros((72, 128, 3), np.uint8))
+    norm = np.array(coco_kp, float)
+    norm[..., :2] /= 1000.0  # within [0.1, 0.9]
+    np.save(tmp_path / "norm.npy", norm)
+    code = main(["import", "--keypoints", str(tmp_path / "norm.npy"), "--layout", "coco17", "--frames", str(frames),
+                 "--fps", "50", "--out", str(tmp_path / "clip")])
+    err = capsys.readouterr().err
+    assert code == 2 and "multiply x by 128 and y by 72" in err and "Traceback" not in err
+    assert not (tmp_path / "clip").exists()
