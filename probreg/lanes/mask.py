@@ -85,9 +85,9 @@ def on_athlete_fraction(image, keypoints_px, bone_points=8, ring_points=128, rin
     Returns
     -------
     float
-        In [0, 1] (bone points off the image count as lying on nothing unlike the track: an
-        athlete half out of the frame scores at most a half there); NaN when the frame has no
-        image or fewer than 8 joints, or too little of the ring lies inside the image.
+        In [0, 1]; a bone point off the image is not counted as unlike (it lies on nothing the
+        image shows), so an athlete half out of the frame scores at most a half there.  NaN when
+        the frame has no image or fewer than 8 joints, or too little of the ring lies inside it.
 
     >>> img = np.full((200, 200, 3), (40, 60, 160), np.uint8)  # a red track
     >>> kp = np.full((17, 2), np.nan)
@@ -123,7 +123,7 @@ def on_athlete_fraction(image, keypoints_px, bone_points=8, ring_points=128, rin
         return 0.0  # the whole skeleton lies off the image: on nothing it shows
     if len(ring) < ring_points // 8:
         return float("nan")
-    # squared colour distances through one product each (a few hundred points: ~0.1 ms a frame)
+    # squared colour distances through one matrix product each (0.2 ms a 1080p frame in all)
     r2 = np.einsum("ij,ij->i", ring, ring)
     d_ring = r2[:, None] + r2[None] - 2.0 * (ring @ ring.T)
     np.fill_diagonal(d_ring, np.inf)
