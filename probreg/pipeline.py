@@ -44,7 +44,7 @@ from .inference.model import PARAM_NAMES, SEGMENTS, ClipModel, NoCalibrationErro
 from .inference.sampling import SamplerSettings
 from .inference.evidence import BRANCHES, BranchChoice, laplace_log_evidence
 from .inference.verdict import (bone_length_cv, clip_verdict, knee_band_width, knee_flexion_peak, limb_image_length,
-                                view_obliquity)
+                                trunk_down_fraction, view_obliquity)
 from .inference.parallel import default_workers, fork_call, in_background, warm_imports
 from .inference.time_base import time_base_check
 from .inference.gait_check import with_time_base
@@ -476,6 +476,7 @@ def _run_clip(clip_dir, out_dir, options, log, protect, extra_files):
     diag["left_right_exchanged"] = exchanged = {"legs": float(model.exchanged[:, 0].mean())}  # the arms: never
     diag["leg_image_px"] = legs_px = limb_image_length(model.kp)  # thighs and shanks: long enough to read?
     diag["keypoints_on_athlete"] = on_athlete = _on_athlete(reg)  # are the keypoints on these images' athlete?
+    diag["trunk_down_fraction"] = trunk_down = trunk_down_fraction(model.kp)  # y pointing up, not down?
     verdict, reasons = clip_verdict(  # over the frames of the shot estimated (all but with --shot all)
         reg.shots.frames[1] - reg.shots.frames[0], calibrated=sum(c is not None for c in cam_list),
         frames_with_angles=n_angle, cuts=reg.shots.cuts if reg.shots.chosen is None else None,
@@ -486,7 +487,8 @@ def _run_clip(clip_dir, out_dir, options, log, protect, extra_files):
         member_sensitivity=sensitivity, lanes_agree=agree, noise_rho=model.noise_rho,
         knee_band_deg=knee_band_width(summ), obliquity_deg=obliquity, knee_peak_deg=knee_peak,
         left_right_exchanged=exchanged, time_base=time_base, lens_conflict=diag.get("given_lens"),
-        limb_px=legs_px, noise_px=model.noise_sd, fps=clip.fps, on_athlete=on_athlete["median"])
+        limb_px=legs_px, noise_px=model.noise_sd, fps=clip.fps, on_athlete=on_athlete["median"],
+        trunk_down=trunk_down)
     result = RunResult(out_dir=out_dir, model=model, posterior=idata, angle_summary=summ, height=height,
                        gait=gait_s, diagnostics=diag, timings=timings, verdict=verdict,
                        verdict_reasons=tuple(reasons), camera_side=side, gait_cycle=cycles,

@@ -1,4 +1,4 @@
-"""Do the keypoints lie on the athlete of the clip's own images?  The verdict's check, measured.
+"""Do the keypoints lie on the athlete of the clip's own images, upright?  The verdict's checks, measured.
 
 :func:`probreg.lanes.on_athlete_fraction` scores one frame: the share of points along the 2-D
 skeleton's bones whose colour is unlike every colour of a ring around it.  A run takes the median
@@ -21,6 +21,11 @@ of its own, plus white noise of 3 % of it per frame (a real nano pose model is 7
 validation renders, ``reports/bench_video.md``).  The own and the biased keypoints must stay above
 the limit, the mismatched ones below it.
 
+The same table gives the upside-down check (:func:`probreg.inference.verdict.trunk_down_fraction`:
+the share of frames whose trunk points down in the image; the verdict's limit is a half) for the
+clip's own keypoints and for them with ``y`` pointing up (``y' = H - 1 - y``, a biomechanics tool's
+convention).
+
 Last, a few clips run end to end through the command line (``probreg run CLIP --out OUT --seed
 0``) with their keypoints scaled by 0.5 and 2: the verdict, its reasons and the camera height's
 error, which such keypoints move far (before this check, under an ``ok`` verdict).
@@ -37,7 +42,7 @@ from pathlib import Path
 
 import numpy as np
 
-from ..inference.verdict import VerdictThresholds
+from ..inference.verdict import VerdictThresholds, trunk_down_fraction
 from ..io import load_clip
 from ..io.clip import load_groundtruth, write_keypoints_json
 from ..io.frames import iter_frames
@@ -88,6 +93,9 @@ def clip_scores(clip_dir, seed=5):
         v = np.asarray(v, float)
         v = v[np.isfinite(v)]
         out[n] = float(np.median(v)) if len(v) else float("nan")
+    flipped = clip.keypoints_px.copy()
+    flipped[..., 1] = clip.image_size[1] - 1 - flipped[..., 1]
+    out["trunk down"], out["trunk down, y up"] = trunk_down_fraction(clip.keypoints_px), trunk_down_fraction(flipped)
     return out
 
 
@@ -104,7 +112,10 @@ def _summary(scores, limit):
     own = np.array([s["own"] for s in scores.values()])
     mis = np.array([s[m[0]] for s in scores.values() for m in MISMATCHES])
     bias = np.array([s[f"bias {b:.0%}"] for s in scores.values() for b in BIASES])
+    down = np.array([s["trunk down"] for s in scores.values()])
+    up = np.array([s["trunk down, y up"] for s in scores.values()])
     return {"clips": len(own), "own_min": float(np.nanmin(own)), "own_max": float(np.nanmax(own)),
+            "trunk_down_max": float(np.nanmax(down)), "trunk_down_y_up_min": float(np.nanmin(up)),
             "own_flagged": int(np.sum(own < limit)), "mismatched_max": float(np.nanmax(mis)),
             "mismatched_mean": float(np.nanmean(mis)), "mismatched_missed": int(np.sum(~(mis < limit))),
             "mismatched_n": int(len(mis)), "biased_min": float(np.nanmin(bias)),
@@ -151,7 +162,8 @@ def run(args=None):
     rep = BenchReport("on-athlete", "Do the keypoints lie on the athlete of the clip's own images?")
     rep.add(__doc__.split("\n\n", 1)[1])
     limit = VerdictThresholds().min_on_athlete
-    header = ["clip", "own"] + [m[0] for m in MISMATCHES] + [f"bias {b:.0%}" for b in BIASES]
+    header = (["clip", "own"] + [m[0] for m in MISMATCHES] + [f"bias {b:.0%}" for b in BIASES]
+              + ["trunk down", "trunk down, y up"])
     with tempfile.TemporaryDirectory(prefix="probreg-onathlete-") as tmp:
         from ..sim.heldout import write_heldout
 
@@ -184,12 +196,14 @@ def run(args=None):
                                  f"{s['own_flagged']} of {s['clips']}",
                                  f"{s['mismatched_max']:.2f} (mean {s['mismatched_mean']:.2f})",
                                  f"{s['mismatched_missed']} of {s['mismatched_n']}", f"{s['biased_min']:.2f}",
-                                 f"{s['biased_flagged']} of {s['biased_n']}"])
+                                 f"{s['biased_flagged']} of {s['biased_n']}", f"{s['trunk_down_max']:.2f}",
+                                 f"{s['trunk_down_y_up_min']:.2f}"])
             rep.add(f"## {title[0].upper() + title[1:]}: clip scores\n")
             rep.add(md_table(header, rows))
         rep.add(f"## Summary (the verdict's limit: {limit:.2f})\n")
         rep.add(md_table(["set", "clips", "own keypoints", "own flagged", "mismatched, largest",
-                          "mismatched not flagged", "biased, smallest", "biased flagged"], summary_rows))
+                          "mismatched not flagged", "biased, smallest", "biased flagged",
+                          "trunk down, largest share of frames", "y up: smallest"], summary_rows))
         picks = [c for c in validation if c.name in ("v05_distorted", "v08_tele")] or heldout[2:4]
         rep.add("## End to end: keypoints in the pixels of a copy scaled by 0.5 and 2\n\n"
                 "`probreg run CLIP --out OUT --seed 0` on the clip as it is (x1) and with its keypoints scaled "

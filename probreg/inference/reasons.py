@@ -112,6 +112,12 @@ REASON_HELP = {
          "probreg detect; or rescale its coordinates to clip.json's image_size); the report's overlay "
          "shows where the skeleton lies"),
     ),
+    "skeleton upside down in the image": (
+        ("the keypoints' trunk points down in the image: their y axis points up (a biomechanics "
+         "tool's or a plot's convention), not down as the image's rows do; every position and angle "
+         "is built on a mirrored skeleton"),
+        "give y in image rows (y_image = image height - 1 - y; probreg import --trc-image-height does it for TRC files)",
+    ),
     "left/right labels unsure": (
         ("the 2D detector often called the left leg right: probreg set the labels right from the "
          "motion, but which leg is the left one is close to a guess"),

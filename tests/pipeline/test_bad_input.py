@@ -266,6 +266,8 @@ def test_keypoints_of_other_images_are_flagged_and_the_clips_own_are_not(clip, t
     assert run["diagnostics"]["keypoints_on_athlete"]["median"] > 0.9
     assert run["diagnostics"]["keypoints_on_athlete"]["frames"] == 40
     assert not any(r.startswith("keypoints off the athlete") for r in run["verdict_reasons"])
+    assert run["diagnostics"]["trunk_down_fraction"] == 0.0
+    assert not any(r.startswith("skeleton upside down") for r in run["verdict_reasons"])
     doc = json.loads((clip / "keypoints2d.json").read_text())
     for f in doc["frames"]:
         if f["keypoints"]:
@@ -279,6 +281,23 @@ def test_keypoints_of_other_images_are_flagged_and_the_clips_own_are_not(clip, t
     assert run["diagnostics"]["keypoints_on_athlete"]["median"] < 0.2
     assert any(r.startswith("keypoints off the athlete (") for r in run["verdict_reasons"]), run
     assert "keypoints off the athlete" in err and "Traceback" not in err
+
+
+def test_keypoints_with_y_pointing_up_are_flagged_even_with_the_side_given(clip, tmp_path, capsys):
+    """Keypoints whose y axis points up (a biomechanics tool's convention) mirror the skeleton in
+    the image: with the camera's side given they passed every other check (``ok``)."""
+    h = json.loads((clip / "clip.json").read_text())["image_size"][1]
+    doc = json.loads((clip / "keypoints2d.json").read_text())
+    for f in doc["frames"]:
+        if f["keypoints"]:
+            f["keypoints"] = [[x, h - 1 - y, s] if y is not None else [x, y, s] for x, y, s in f["keypoints"]]
+    (clip / "keypoints2d.json").write_text(json.dumps(doc))
+    out = tmp_path / "flipped"
+    code = main(["run", str(clip), "--out", str(out), "--camera-side", "main"] + FAST_RUN)
+    run = json.loads((out / "run.json").read_text())
+    assert code == 3 and run["diagnostics"]["trunk_down_fraction"] == 1.0 and (out / "angles.csv").exists()
+    assert "skeleton upside down in the image (the trunk points down in 100 % of frames)" in run["verdict_reasons"]
+    assert "Traceback" not in capsys.readouterr().err
 
 
 # ----------------------------------------------------------------------------- 5. metadata
