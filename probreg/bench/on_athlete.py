@@ -18,8 +18,13 @@ model run on a resized copy of the frames) and moved 100 px to the right (a crop
 offset).  Then with keypoints that lie on the athlete but off the joint centres, as a detector's
 bias puts them: each joint moved by a fixed 10 % or 20 % of the skeleton's extent in a direction
 of its own, plus white noise of 3 % of it per frame (a real nano pose model is 7-13 % off on the
-validation renders, ``reports/bench_video.md``).  The own and the biased keypoints must stay above
-the limit, the mismatched ones below it.
+validation renders, ``reports/bench_video.md``).  And with the clip's own keypoints on frames where a
+second runner in the same kit stands beside the athlete (a copy of the athlete's box pasted 0.8 of
+the skeleton's extent to the side, across the ring the check compares with: a sprint heat's
+neighbour at its worst).  The own and the biased keypoints must stay above the limit, the
+mismatched ones below it; the twin shows how close a neighbour in the same kit brings a clip's own
+keypoints to a false flag (the check compares the skeleton with every colour of the ring, the
+twin's too).
 
 The same table gives the upside-down check (:func:`probreg.inference.verdict.trunk_down_fraction`:
 the share of frames whose trunk points down in the image; the verdict's limit is a half) for the
@@ -62,6 +67,25 @@ MISMATCHES = (
 )
 #: a detector's bias: each joint off its centre by this share of the skeleton's extent
 BIASES = (0.10, 0.20)
+#: a second runner in the same kit beside the athlete: a copy of the athlete's box this many
+#: skeleton extents to the side (the box is 1.2 extents wide: at 0.8 the copy crosses the ring)
+NEIGHBOUR_OFFSET = 0.8
+
+
+def with_neighbour(image, xy, offset=NEIGHBOUR_OFFSET):
+    """``image`` with a copy of the athlete's box (the skeleton's box grown by a tenth of its
+    extent) pasted ``offset`` extents to the right, or to the left where the right has no room."""
+    ok = np.isfinite(xy).all(axis=1)
+    lo, hi = xy[ok].min(axis=0), xy[ok].max(axis=0)
+    ext = float(np.max(hi - lo))
+    h, w = image.shape[:2]
+    x0, y0 = np.maximum(np.floor(lo - 0.1 * ext).astype(int), 0)
+    x1, y1 = np.minimum(np.ceil(hi + 0.1 * ext).astype(int), [w, h])
+    dx = int(offset * ext) * (1 if x1 + int(offset * ext) <= w else -1)
+    out = image.copy()
+    if 0 <= x0 + dx and x1 + dx <= w and x1 > x0 and y1 > y0:
+        out[y0:y1, x0 + dx:x1 + dx] = image[y0:y1, x0:x1]
+    return out
 TUNING_SEEDS = range(8101, 8141)
 
 
@@ -76,7 +100,7 @@ def clip_scores(clip_dir, seed=5):
     rng = np.random.default_rng(seed)
     dirs = rng.normal(size=(17, 2))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
-    names = ["own"] + [m[0] for m in MISMATCHES] + [f"bias {b:.0%}" for b in BIASES]
+    names = ["own"] + [m[0] for m in MISMATCHES] + [f"bias {b:.0%}" for b in BIASES] + ["neighbour"]
     per_frame = {n: [] for n in names}
     for i, img in iter_frames(clip):
         xy = xy_all[i]
@@ -88,6 +112,8 @@ def clip_scores(clip_dir, seed=5):
         for b in BIASES:
             off = b * extent * dirs + rng.normal(0.0, 0.03 * extent, (17, 2))
             per_frame[f"bias {b:.0%}"].append(on_athlete_fraction(img, xy + off))
+        if img is not None:
+            per_frame["neighbour"].append(on_athlete_fraction(with_neighbour(img, xy), xy))
     out = {}
     for n, v in per_frame.items():
         v = np.asarray(v, float)
@@ -112,6 +138,7 @@ def _summary(scores, limit):
     own = np.array([s["own"] for s in scores.values()])
     mis = np.array([s[m[0]] for s in scores.values() for m in MISMATCHES])
     bias = np.array([s[f"bias {b:.0%}"] for s in scores.values() for b in BIASES])
+    twin = np.array([s["neighbour"] for s in scores.values()])
     down = np.array([s["trunk down"] for s in scores.values()])
     up = np.array([s["trunk down, y up"] for s in scores.values()])
     return {"clips": len(own), "own_min": float(np.nanmin(own)), "own_max": float(np.nanmax(own)),
@@ -119,7 +146,9 @@ def _summary(scores, limit):
             "own_flagged": int(np.sum(own < limit)), "mismatched_max": float(np.nanmax(mis)),
             "mismatched_mean": float(np.nanmean(mis)), "mismatched_missed": int(np.sum(~(mis < limit))),
             "mismatched_n": int(len(mis)), "biased_min": float(np.nanmin(bias)),
-            "biased_flagged": int(np.sum(bias < limit)), "biased_n": int(len(bias))}
+            "biased_flagged": int(np.sum(bias < limit)), "biased_n": int(len(bias)),
+            "twin_min": float(np.nanmin(twin)), "twin_median": float(np.nanmedian(twin)),
+            "twin_flagged": int(np.sum(twin < limit))}
 
 
 def _scaled_copy(clip_dir, dst, scale):
@@ -163,7 +192,7 @@ def run(args=None):
     rep.add(__doc__.split("\n\n", 1)[1])
     limit = VerdictThresholds().min_on_athlete
     header = (["clip", "own"] + [m[0] for m in MISMATCHES] + [f"bias {b:.0%}" for b in BIASES]
-              + ["trunk down", "trunk down, y up"])
+              + ["neighbour in the same kit", "trunk down", "trunk down, y up"])
     with tempfile.TemporaryDirectory(prefix="probreg-onathlete-") as tmp:
         from ..sim.heldout import write_heldout
 
@@ -196,13 +225,16 @@ def run(args=None):
                                  f"{s['own_flagged']} of {s['clips']}",
                                  f"{s['mismatched_max']:.2f} (mean {s['mismatched_mean']:.2f})",
                                  f"{s['mismatched_missed']} of {s['mismatched_n']}", f"{s['biased_min']:.2f}",
-                                 f"{s['biased_flagged']} of {s['biased_n']}", f"{s['trunk_down_max']:.2f}",
+                                 f"{s['biased_flagged']} of {s['biased_n']}",
+                                 f"{s['twin_min']:.2f} (median {s['twin_median']:.2f})",
+                                 f"{s['twin_flagged']} of {s['clips']}", f"{s['trunk_down_max']:.2f}",
                                  f"{s['trunk_down_y_up_min']:.2f}"])
             rep.add(f"## {title[0].upper() + title[1:]}: clip scores\n")
             rep.add(md_table(header, rows))
         rep.add(f"## Summary (the verdict's limit: {limit:.2f})\n")
         rep.add(md_table(["set", "clips", "own keypoints", "own flagged", "mismatched, largest",
                           "mismatched not flagged", "biased, smallest", "biased flagged",
+                          "beside a twin, smallest", "beside a twin, flagged",
                           "trunk down, largest share of frames", "y up: smallest"], summary_rows))
         picks = [c for c in validation if c.name in ("v05_distorted", "v08_tele")] or heldout[2:4]
         rep.add("## End to end: keypoints in the pixels of a copy scaled by 0.5 and 2\n\n"
