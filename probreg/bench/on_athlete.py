@@ -67,6 +67,7 @@ MISMATCHES = (
 )
 #: a detector's bias: each joint off its centre by this share of the skeleton's extent
 BIASES = (0.10, 0.20)
+TUNING_SEEDS = range(8101, 8141)
 #: a second runner in the same kit beside the athlete: a copy of the athlete's box this many
 #: skeleton extents to the side (the box is 1.2 extents wide: at 0.8 the copy crosses the ring)
 NEIGHBOUR_OFFSET = 0.8
@@ -86,17 +87,19 @@ def with_neighbour(image, xy, offset=NEIGHBOUR_OFFSET):
     if 0 <= x0 + dx and x1 + dx <= w and x1 > x0 and y1 > y0:
         out[y0:y1, x0 + dx:x1 + dx] = image[y0:y1, x0:x1]
     return out
-TUNING_SEEDS = range(8101, 8141)
 
 
 def clip_scores(clip_dir, seed=5):
     """The clip score (median over frames of :func:`on_athlete_fraction`) of the clip's own
-    keypoints, of each of :data:`MISMATCHES` and of each of :data:`BIASES`; ``{name: score}``."""
+    keypoints, of each of :data:`MISMATCHES`, of each of :data:`BIASES` and of the own keypoints
+    beside a twin (:func:`with_neighbour`), then :func:`trunk_down_fraction` of the own keypoints
+    and of them with ``y`` pointing up; ``{name: score}`` in that order."""
     clip = load_clip(clip_dir)
     xy_all = clip.keypoints_px[..., :2]
     seen = np.isfinite(xy_all).all(axis=-1).sum(axis=1) >= 2  # frames with a skeleton to measure
     xy_seen = xy_all[seen]
-    extent = float(np.median(np.nanmax(np.nanmax(xy_seen, 1) - np.nanmin(xy_seen, 1), axis=-1))) if seen.any() else 1.0
+    spans = np.nanmax(xy_seen, axis=1) - np.nanmin(xy_seen, axis=1)  # (frames, 2)
+    extent = float(np.median(spans.max(axis=-1))) if seen.any() else 1.0
     rng = np.random.default_rng(seed)
     dirs = rng.normal(size=(17, 2))
     dirs /= np.linalg.norm(dirs, axis=1, keepdims=True)
@@ -104,7 +107,7 @@ def clip_scores(clip_dir, seed=5):
     per_frame = {n: [] for n in names}
     for i, img in iter_frames(clip):
         xy = xy_all[i]
-        if not np.isfinite(xy).all(axis=1).sum() >= 8:
+        if np.isfinite(xy).all(axis=1).sum() < 8:
             continue
         per_frame["own"].append(on_athlete_fraction(img, xy))
         for name, move in MISMATCHES:

@@ -55,6 +55,8 @@ class SamplerSettings:
             raise ValueError(f"burn_in must be at least 0, got {self.burn_in}")
         if int(self.draws_per_noise_copy) < 1:
             raise ValueError(f"draws_per_noise_copy must be at least 1, got {self.draws_per_noise_copy}")
+        if int(self.seed) < 0:
+            raise ValueError(f"seed must be a whole number >= 0, got {self.seed}")
         if self.moves not in MOVES:
             raise ValueError(f"moves must be one of {', '.join(MOVES)}, got {self.moves!r}")
 

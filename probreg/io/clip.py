@@ -411,7 +411,11 @@ def load_clip(path, min_score=0.0):
         ``fps`` is not within :data:`FPS_RANGE` or ``lane_width_m`` within
         :data:`LANE_WIDTH_RANGE_M`; if ``image_size`` disagrees with the frames;
         if keypoint scores lie outside [0, 1]; if two images carry one frame number.
+    ValueError
+        If ``min_score`` is not a confidence in [0, 1] (above 1 it would drop every keypoint).
     """
+    if not 0 <= min_score <= 1:
+        raise ValueError(f"min_score must be a confidence between 0 and 1, got {min_score}")
     path = Path(path)
     if not path.is_dir():
         raise ClipFormatError(f"{path}: clip folder not found")

@@ -24,7 +24,7 @@ from pathlib import Path
 import numpy as np
 
 from ..geometry import COCO_NAMES, JOINT_NAMES, coco_to_h36m
-from .clip import ClipFormatError, _read_json as _load_json
+from .clip import ClipFormatError, _read_json
 
 __all__ = ["read_keypoints", "read_coco_results", "read_openpose_folder", "read_keypoint_csv",
            "read_keypoint_array", "read_trc", "FORMATS", "BODY25_TO_COCO", "COCO18_TO_COCO"]
@@ -48,7 +48,7 @@ def _finish(kp_coco_or_h36m, layout, min_score):
 
 def read_coco_results(path, min_score=0.3):
     """COCO keypoint results (list of detections) -> (F, 17, 3) H36M; frames = sorted image ids."""
-    doc = _load_json(path)
+    doc = _read_json(path)
     if isinstance(doc, dict) and "annotations" in doc:
         doc = doc["annotations"]
     if not isinstance(doc, list):
@@ -87,7 +87,7 @@ def read_openpose_folder(folder, min_score=0.3):
     frames = []
     prev = None
     for i, f in enumerate(files):
-        doc = _load_json(f)
+        doc = _read_json(f)
         people = doc.get("people", []) if isinstance(doc, dict) else None
         if people is None:
             raise ClipFormatError(f"{f}: expected an object with 'people' (frame {i})")

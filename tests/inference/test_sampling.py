@@ -55,6 +55,14 @@ def test_unknown_moves_are_a_clear_error():
         SamplerSettings(moves="gibbs")
 
 
+def test_a_negative_seed_is_a_clear_error():
+    """Not NumPy's 'expected non-negative integer' from deep inside the sampler (the Python API;
+    the command line, --config and batch manifests name their flag or column)."""
+    with pytest.raises(ValueError, match="seed must be a whole number >= 0, got -1"):
+        SamplerSettings(seed=-1)
+    assert SamplerSettings(seed=0).seed == 0
+
+
 @pytest.mark.parametrize("field", ["n_draws", "max_steps", "chunk"])
 def test_an_empty_budget_is_a_clear_error(field):
     """``--draws 0`` once ran the whole sampler and then failed with "noise_copies is empty"."""

@@ -44,6 +44,10 @@ def test_low_scores_become_missing(tmp_path):
     clip = load_clip(d, min_score=0.3)
     assert np.all(np.isnan(clip.keypoints_px[0, 16])) and np.all(np.isfinite(clip.keypoints_px[0, 15]))
     assert clip.n_frames == 3 and np.all(np.isnan(clip.keypoints_px[1:]))
+    # a score limit no confidence can reach would drop every keypoint: an error, not an empty clip
+    for bad in (2.0, -0.1, float("nan")):
+        with pytest.raises(ValueError, match="min_score must be a confidence between 0 and 1"):
+            load_clip(d, min_score=bad)
 
 
 @pytest.mark.parametrize("content, match", [
