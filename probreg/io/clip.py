@@ -234,12 +234,7 @@ def read_keypoints_json(path, n_frames=None):
     fmt = doc.get("format", "h36m17")
     if fmt not in ("h36m17", "coco17"):
         raise ClipFormatError(f"{path}: unknown keypoint format {fmt!r} (h36m17 or coco17)")
-    # optional 'joint_names' that are exactly the other format's order contradict 'format': every joint
-    # would be read as another one (names spelled otherwise are not checked)
-    other, other_names = ("coco17", COCO_NAMES) if fmt == "h36m17" else ("h36m17", JOINT_NAMES)
-    if isinstance(doc.get("joint_names"), list) and doc["joint_names"] == list(other_names):
-        raise ClipFormatError(f"{path}: 'format' says {fmt} but 'joint_names' are in {other}'s order; "
-                              f"set \"format\": \"{other}\" (or fix the names)")
+    order = _joint_order(path, fmt, doc.get("joint_names"))
     frames = doc["frames"]
     if not isinstance(frames, list):
         raise ClipFormatError(f"{path}: 'frames' must be a list")
@@ -279,6 +274,8 @@ def read_keypoints_json(path, n_frames=None):
         if arr.shape[1] == 2:
             arr = np.concatenate([arr, np.ones((17, 1))], axis=1)
         out[fi] = arr
+    if order is not None:  # columns named in another order: put each joint where the format has it
+        out = out[:, order]
     scores = out[..., 2]
     with np.errstate(invalid="ignore"):
         bad_score = np.isfinite(scores) & ((scores < 0) | (scores > 1 + 1e-6))
@@ -293,6 +290,34 @@ def read_keypoints_json(path, n_frames=None):
     bad = np.any(~np.isfinite(out), axis=-1)
     out[bad] = np.nan
     return out
+
+
+def _joint_order(path, fmt, names):
+    """Where each of ``fmt``'s joints is among the optional ``joint_names`` of a keypoints file:
+    ``None`` when they are absent, spelled otherwise (not checked) or in the format's own order;
+    the index array that puts the joints in the format's order when they are the format's names in
+    another order.  Names in the other format's order contradict ``format`` (every joint would be
+    read as another one): a :class:`ClipFormatError`.
+
+    >>> names = list(JOINT_NAMES)
+    >>> _joint_order("k.json", "h36m17", names) is None, _joint_order("k.json", "h36m17", None) is None
+    (True, True)
+    >>> _joint_order("k.json", "h36m17", names[::-1])[:3].tolist()  # pelvis is the last column, ...
+    [16, 15, 14]
+    >>> _joint_order("k.json", "h36m17", list(COCO_NAMES))
+    Traceback (most recent call last):
+    probreg.io.clip.ClipFormatError: k.json: 'format' says h36m17 but 'joint_names' are coco17's names; set "format": "coco17" (or fix the names)
+    """
+    if not isinstance(names, list):
+        return None
+    own = list(JOINT_NAMES if fmt == "h36m17" else COCO_NAMES)
+    other, other_names = ("coco17", COCO_NAMES) if fmt == "h36m17" else ("h36m17", JOINT_NAMES)
+    if sorted(map(str, names)) == sorted(other_names) and sorted(other_names) != sorted(own):
+        raise ClipFormatError(f"{path}: 'format' says {fmt} but 'joint_names' are {other}'s names; "
+                              f"set \"format\": \"{other}\" (or fix the names)")
+    if names == own or sorted(map(str, names)) != sorted(own):
+        return None
+    return np.array([names.index(n) for n in own])
 
 
 def write_keypoints_json(path, keypoints_px, fmt="h36m17", written_by=None):
@@ -362,6 +387,26 @@ def _check_number(meta, key, path, lo, hi, what):
     if isinstance(v, bool) or not isinstance(v, (int, float)) or not math.isfinite(v) or not lo <= v <= hi:
         raise ClipFormatError(f"{path}: '{key}' must be {what} between {lo:g} and {hi:g}, got {v!r}")
     return v
+
+
+def _video_length_notes(video, n):
+    """A note when the video's container says it holds fewer or more frames than the clip's ``n``
+    (``clip.json``'s ``n_frames``, else the keypoints'): the frames past the video's end have no
+    image; frames past the clip's end are not read.  Nothing when the container gives no count."""
+    import cv2
+
+    cap = cv2.VideoCapture(str(video))
+    try:
+        count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0
+    finally:
+        cap.release()
+    if count <= 0 or count == n:
+        return []
+    if count < n:
+        return [f"{video}: {count} frames, the clip {n} (clip.json n_frames or the keypoints): frames {count} to "
+                f"{n - 1} have no image (status bad_image)"]
+    return [f"{video}: {count} frames, the clip {n} (clip.json n_frames or the keypoints): the last {count - n} "
+            f"are not read"]
 
 
 def _actual_image_size(frame_paths, video):
@@ -483,6 +528,8 @@ def load_clip(path, min_score=0.0):
         notes.append(f"{frame_dir}: no image for {len(missing)} of {n} frames (first: frame {missing[0]}); "
                      f"their status is missing_image")
     video = path / "video.mp4"
+    if not frame_paths and video.exists() and n:
+        notes += _video_length_notes(video, n)
     actual = _actual_image_size(frame_paths, video if (not frame_paths and video.exists()) else None)
     if actual is not None and tuple(actual[0]) != (w, h):
         (aw, ah), src = actual

@@ -119,3 +119,24 @@ def test_nan_keypoints_are_missing_not_zero(tmp_path):
     kp[3] = [None, 2.0, 0.9]
     d = _clip(tmp_path, {"format": "h36m17", "frames": [{"frame": 0, "keypoints": kp}]})
     assert np.all(np.isnan(load_clip(d).keypoints_px[0, 3]))
+
+
+def test_a_video_shorter_or_longer_than_the_clip_is_named_in_the_notes(tmp_path):
+    """A video.mp4 of 5 frames in a clip of 8 (clip.json n_frames): frames 5 to 7 have no image, said
+    at load time (before 0.2.0.dev35 only the lane step's 'could not be decoded' told of it); a clip
+    of 3 frames leaves the video's last 2 unread; a clip of 5 says nothing."""
+    import cv2
+
+    d = _clip(tmp_path, meta={"fps": 25.0, "image_size": [64, 48], "n_frames": 8})
+    writer = cv2.VideoWriter(str(d / "video.mp4"), cv2.VideoWriter_fourcc(*"mp4v"), 25, (64, 48))
+    if not writer.isOpened():
+        pytest.skip("this OpenCV cannot write mp4v")
+    for k in range(5):
+        writer.write(np.full((48, 64, 3), 40 * k, np.uint8))
+    writer.release()
+    notes = [n for n in load_clip(d).notes if "video.mp4" in n]
+    assert len(notes) == 1 and "5 frames, the clip 8" in notes[0] and "frames 5 to 7 have no image" in notes[0]
+    for n_frames, expect in ((3, "the last 2 are not read"), (5, None)):
+        (d / "clip.json").write_text(json.dumps({"fps": 25.0, "image_size": [64, 48], "n_frames": n_frames}))
+        notes = [n for n in load_clip(d).notes if "video.mp4" in n]
+        assert (notes == []) if expect is None else (len(notes) == 1 and expect in notes[0])

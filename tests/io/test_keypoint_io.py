@@ -7,7 +7,7 @@ import numpy as np
 import pytest
 
 from probreg.cli import main
-from probreg.geometry import COCO_NAMES, JOINT_INDEX, coco_to_h36m
+from probreg.geometry import COCO_NAMES, JOINT_INDEX, JOINT_NAMES, coco_to_h36m
 from probreg.io import ClipFormatError, load_clip, read_keypoints
 from probreg.io.keypoints import BODY25_TO_COCO
 
@@ -167,11 +167,33 @@ def test_keypoints2d_json_round_trip_and_a_format_its_names_contradict(tmp_path,
     doc = json.loads((tmp_path / "coco17.json").read_text())
     doc["format"] = "h36m17"  # COCO data declared as H36M
     (tmp_path / "bad.json").write_text(json.dumps(doc))
-    with pytest.raises(ClipFormatError, match="'joint_names' are in coco17's order; set \"format\": \"coco17\""):
+    with pytest.raises(ClipFormatError, match="'joint_names' are coco17's names; set \"format\": \"coco17\""):
         read_keypoints_json(tmp_path / "bad.json")
+    doc["joint_names"] = doc["joint_names"][::-1]  # the other format's names in any order: as wrong
+    (tmp_path / "bad2.json").write_text(json.dumps(doc))
+    with pytest.raises(ClipFormatError, match="coco17's names"):
+        read_keypoints_json(tmp_path / "bad2.json")
     doc["joint_names"] = [n.upper() for n in COCO_NAMES]
     (tmp_path / "other.json").write_text(json.dumps(doc))
     assert read_keypoints_json(tmp_path / "other.json").shape == (5, 17, 3)
+
+
+def test_joint_columns_named_in_another_order_are_read_by_their_names(tmp_path, coco_kp):
+    """A file that lists the format's own joint names in another order (its columns in that order)
+    is read by the names: the joints come back where the format has them (before 0.2.0.dev35 the
+    names were ignored and every joint was read as another one)."""
+    from probreg.io.clip import read_keypoints_json, write_keypoints_json
+
+    for fmt, names, expect in (("h36m17", JOINT_NAMES, coco_kp), ("coco17", COCO_NAMES, coco_to_h36m(coco_kp))):
+        write_keypoints_json(tmp_path / "k.json", coco_kp, fmt=fmt)
+        doc = json.loads((tmp_path / "k.json").read_text())
+        perm = np.random.default_rng(3).permutation(17)
+        doc["joint_names"] = [names[j] for j in perm]
+        for f in doc["frames"]:
+            if f["keypoints"] is not None:
+                f["keypoints"] = [f["keypoints"][j] for j in perm]
+        (tmp_path / "shuffled.json").write_text(json.dumps(doc))
+        assert np.allclose(read_keypoints_json(tmp_path / "shuffled.json"), expect, atol=1e-3, equal_nan=True)
 
 
 def test_import_refuses_keypoints_normalised_to_the_image_before_writing(tmp_path, coco_kp, capsys):
