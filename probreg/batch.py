@@ -116,7 +116,7 @@ def read_manifest(path, base_options=None):
     from .lanes.shots import is_shot_option
 
     base = {**DEFAULTS, **(base_options or {})}
-    entries, used = [], {}
+    entries, used = [], set()
     for k, row in enumerate(rows, start=2):  # line numbers as a spreadsheet shows them
         clip_cell = (row.get("clip") or "").strip()
         if not clip_cell:
@@ -138,7 +138,7 @@ def read_manifest(path, base_options=None):
                 raise ClipFormatError(f"{path}: line {k}, column '{col}': {cell!r} is not "
                                       f"{'a number' if kind is float else 'an integer'}") from None
             if dest == "name":
-                name = value
+                name = _checked_name(value, path, k)
             elif dest == "camera_side" and value not in ("auto", "main", "far"):
                 raise ClipFormatError(f"{path}: line {k}, column 'camera_side': {value!r} is not auto, main or far")
             elif dest == "shot" and not is_shot_option(value):
@@ -151,13 +151,36 @@ def read_manifest(path, base_options=None):
                 raise ClipFormatError(f"{path}: line {k}, column 'min_score': {cell!r} is not a confidence in [0, 1]")
             else:
                 opts[dest] = value
-        name = name or (clip.stem if clip.suffix else clip.name)
-        n = used.get(name, 0)
-        used[name] = n + 1
-        if n:
-            name = f"{name}-{n + 1}"  # two clips of one name: the later ones get a suffix
+        name = _free_name(name or (clip.stem if clip.suffix else clip.name) or "clip", used)
         entries.append(BatchEntry(row=k, clip=clip, name=name, options=opts))
     return entries
+
+
+def _checked_name(value, path, line):
+    """A manifest's ``name`` cell as a result folder's name in ``DIR``: one plain folder name (no
+    path separator, not ``.``/``..``, not hidden, not ``summary.csv``), else a ClipFormatError."""
+    if (value in (".", "..") or value.startswith(".") or "/" in value or "\\" in value or "\0" in value
+            or value.casefold() == "summary.csv"):
+        raise ClipFormatError(f"{path}: line {line}, column 'name': {value!r} is not a folder name inside the "
+                              f"output folder (no '/', '\\\\', leading '.', or 'summary.csv')")
+    return value
+
+
+def _free_name(name, used):
+    """``name``, or ``name-2``, ``name-3``, ... when it is taken: every entry gets its own result
+    folder, also where the file system ignores case (``Heat1`` and ``heat1``) and where a later
+    clip is itself called ``heat1-2``.  ``used`` holds the case-folded names given so far.
+
+    >>> used = set()
+    >>> [_free_name(n, used) for n in ("x", "x", "x-2", "X", "y")]
+    ['x', 'x-2', 'x-2-2', 'X-3', 'y']
+    """
+    base, k, candidate = name, 1, name
+    while candidate.casefold() in used:
+        k += 1
+        candidate = f"{base}-{k}"
+    used.add(candidate.casefold())
+    return candidate
 
 
 def _fingerprint(path):

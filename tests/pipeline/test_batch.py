@@ -45,6 +45,17 @@ def test_manifest_paths_are_relative_to_it_and_options_override(tmp_path):
     assert {"stature_m", "camera_side", "model"} <= set(MANIFEST_COLUMNS)
 
 
+def test_every_entry_gets_its_own_result_folder(tmp_path):
+    """Suffixed names never meet a clip of that name, nor differ from another only in case (one
+    folder where the file system ignores case); before 0.2.0.dev35 the clips x, x and x-2 all but
+    one wrote DIR/x-2 and lost a summary row."""
+    m = tmp_path / "m.csv"
+    m.write_text("clip,name\na/x,\nb/x,\nx-2,\nHeat,\nheat,\nc/y,x\n")
+    names = [e.name for e in read_manifest(m)]
+    assert names == ["x", "x-2", "x-2-2", "Heat", "heat-2", "x-3"]
+    assert len({n.casefold() for n in names}) == len(names)
+
+
 @pytest.mark.parametrize("text, needle", [
     ("video\nx\n", "needs a 'clip' column"),
     ("clip,colour\nx,red\n", "unknown column(s) colour"),
@@ -55,6 +66,9 @@ def test_manifest_paths_are_relative_to_it_and_options_override(tmp_path):
     ("clip,seed\nx,-3\n", "column 'seed': '-3' is not a whole number >= 0"),
     ("clip,min_score\nx,30\n", "column 'min_score': '30' is not a confidence in [0, 1]"),
     ("clip\n\n,\n", "empty 'clip'"),
+    ("clip,name\nx,../elsewhere\n", "column 'name': '../elsewhere' is not a folder name inside the output folder"),
+    ("clip,name\nx,.\n", "column 'name': '.' is not a folder name"),
+    ("clip,name\nx,Summary.csv\n", "column 'name': 'Summary.csv' is not a folder name"),
 ])
 def test_bad_manifests_name_line_and_column(tmp_path, text, needle, capsys):
     m = tmp_path / "m.csv"
