@@ -3,11 +3,10 @@
 Commands that external benchmarks call keep their names and flags:
 ``probreg synth --out DIR [--preset NAME] [--seed N] [--frames N] [--no-images]``.
 
-Exit codes: 0 success; 2 a user error (bad input or option: one line naming the file or
-option and what was expected, no traceback); 3 the results were written but are not usable
-as they stand (``run``: the clip verdict is not ``ok``; ``calibrate``: no frame calibrated);
-130 interrupted (the previous result is left intact); 1 a bug (``--debug`` shows the
-traceback of any error).
+Exit codes: 0 success; 2 a user error (bad input or option: one line naming the file or option
+and what was expected, no traceback); 3 the results were written but are not usable as they stand
+(``run``: the clip verdict is not ``ok``; ``calibrate``: no frame calibrated); 130 interrupted (the
+previous result is left intact); 1 a bug (``--debug`` shows the traceback of any error).
 """
 
 from __future__ import annotations
@@ -62,7 +61,7 @@ def _cmd_synth(args):
     if args.suite:
         print(f"wrote {len(paths)} {'held-out ' if args.suite == 'heldout' else ''}clips under {args.out}")
         return 0
-    overrides = {"style": args.style} if args.style else {}
+    overrides = {k: v for k, v in (("style", args.style), ("rivals", args.rivals)) if v}
     cam_kw = {k: v for k, v in (("height_m", args.camera_height), ("distance_m", args.distance),
                                 ("rail_frac", args.rail)) if v is not None}
     if args.fov is not None:
@@ -460,6 +459,7 @@ def build_parser():
     s.add_argument("--distance", type=float, default=None, help="override camera distance across the track (m)")
     s.add_argument("--fov", type=float, default=None, help="fix the horizontal field of view (deg)")
     s.add_argument("--rail", type=float, default=None, help="camera on a rail at this share of the runner's speed")
+    s.add_argument("--rivals", type=int, default=0, help="other runners in the lanes next to the athlete's (0-7)")
     s.add_argument("--jobs", type=int, default=None, help="rendering processes (default: all cores)")
     s.add_argument("--overwrite", action="store_true",
                    help="use a non-empty --out that probreg did not write (moved aside, never deleted)")

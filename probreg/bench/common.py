@@ -34,6 +34,7 @@ BENCHMARKS = {
     "rails": "probreg.bench.rails:run",
     "long-clips": "probreg.bench.long_clips:run",
     "on-athlete": "probreg.bench.on_athlete:run",
+    "race": "probreg.bench.race:run",
 }
 
 

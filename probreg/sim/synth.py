@@ -10,7 +10,7 @@ from __future__ import annotations
 import concurrent.futures as cf
 import multiprocessing as mp
 import os
-from dataclasses import asdict, dataclass, field
+from dataclasses import asdict, dataclass, field, replace
 from pathlib import Path
 
 import cv2
@@ -29,7 +29,7 @@ from ..io.clip import atomic_output_dir, write_json, write_keypoints_json
 from .render import RenderStyle, finish_image, render_background, render_runner
 from .runner import STYLES, Anthropometry, RunnerMotion, gait_for_style, simulate_runner
 
-__all__ = ["CameraSetup", "DetectorNoise", "SynthConfig", "SynthClip", "PRESETS", "SUITES", "config_from_preset", "simulate_broadcast_cameras", "noisy_keypoints", "synthesize", "write_clip", "write_suite"]
+__all__ = ["CameraSetup", "DetectorNoise", "SynthConfig", "SynthClip", "Rival", "RIVAL_KITS", "rival_lanes", "simulate_rivals", "PRESETS", "SUITES", "config_from_preset", "simulate_broadcast_cameras", "noisy_keypoints", "synthesize", "write_clip", "write_suite"]
 
 
 @dataclass(frozen=True)
@@ -158,6 +158,9 @@ class SynthConfig:
     noise: DetectorNoise = field(default_factory=DetectorNoise)
     render: RenderStyle = field(default_factory=RenderStyle)
     mid_x_m: float = 45.0
+    # other runners of the race in the lanes next to the athlete's (0: the athlete alone, as every
+    # clip before 0.2.0.dev35 was); :func:`simulate_rivals`
+    rivals: int = 0
 
     def __post_init__(self):
         if self.style not in STYLES:
@@ -172,6 +175,8 @@ class SynthConfig:
             raise ValueError(f"athlete_lane must be 1..{STANDARD_TRACK.n_lanes}")
         if min(self.image_size) < 16:
             raise ValueError("image size too small")
+        if not 0 <= int(self.rivals) < STANDARD_TRACK.n_lanes:
+            raise ValueError(f"rivals must be 0..{STANDARD_TRACK.n_lanes - 1} (one runner per other lane)")
 
 
 def _u(rng, lo, hi):
@@ -390,6 +395,58 @@ class SynthClip:
     athlete_height_px: np.ndarray
     lane_y_m: float
     preset: str | None = None
+    rivals: tuple = ()
+
+
+#: kits (shirt, shorts; BGR) and skin tones (BGR) of the other runners of a race: none is the
+#: athlete's default kit (:class:`~probreg.sim.render.RenderStyle`)
+RIVAL_KITS = (((40, 40, 190), (40, 40, 150)), ((170, 100, 30), (120, 60, 20)), ((40, 190, 220), (40, 90, 40)),
+              ((35, 35, 35), (30, 30, 30)), ((60, 140, 50), (235, 235, 235)), ((30, 110, 230), (35, 35, 35)),
+              ((150, 60, 140), (60, 40, 100)), ((235, 235, 235), (160, 40, 40)))
+RIVAL_SKINS = ((120, 150, 200), (70, 100, 150), (45, 65, 100), (150, 180, 225))
+
+
+@dataclass(frozen=True)
+class Rival:
+    """Another runner of the race: its lane, motion and look (``style``: its kit and skin)."""
+
+    lane: int
+    motion: RunnerMotion
+    style: RenderStyle
+
+
+def rival_lanes(athlete_lane, n, n_lanes=STANDARD_TRACK.n_lanes):
+    """The lanes of ``n`` other runners: the nearest to the athlete's first, inside before outside.
+
+    >>> rival_lanes(4, 3), rival_lanes(1, 3), rival_lanes(8, 2)
+    ([3, 5, 2], [2, 3, 4], [7, 6])
+    """
+    order = sorted((ln for ln in range(1, n_lanes + 1) if ln != athlete_lane),
+                   key=lambda ln: (abs(ln - athlete_lane), ln))
+    return order[:n]
+
+
+def simulate_rivals(config: SynthConfig, seed, motion: RunnerMotion):
+    """``config.rivals`` other runners next to the athlete (:func:`rival_lanes`): the same running
+    style, speeds within 3 % of the athlete's, 2.5 m ahead or behind at most (a close race, where
+    they overlap the athlete in the image most), statures 1.60-1.95 m, a kit from
+    :data:`RIVAL_KITS` and a skin tone from :data:`RIVAL_SKINS`.  Their random numbers are their
+    own, so the athlete, the cameras and the keypoints are those of the clip without rivals."""
+    out = []
+    duration = config.n_frames / config.fps
+    start_x = config.mid_x_m - motion.gait.speed_mps * duration / 2
+    for k, lane in enumerate(rival_lanes(config.athlete_lane, int(config.rivals))):
+        rng = np.random.default_rng([int(seed), 611953, k])
+        anthro = Anthropometry.from_stature(_u(rng, 1.60, 1.95), rng=rng)
+        gait = gait_for_style(config.style, rng=rng, speed_mps=motion.gait.speed_mps * _u(rng, 0.97, 1.03))
+        lane_y = float(lane_center_y(lane)) + rng.uniform(-0.15, 0.15)
+        m = simulate_runner(anthro, gait, config.n_frames, config.fps, rng=rng,
+                            start_x_m=start_x + _u(rng, -2.5, 2.5), lane_y_m=lane_y, start_phase=rng.uniform())
+        shirt, shorts = RIVAL_KITS[int(rng.integers(len(RIVAL_KITS)))]
+        skin = RIVAL_SKINS[int(rng.integers(len(RIVAL_SKINS)))]
+        out.append(Rival(lane=lane, motion=m,
+                         style=replace(config.render, shirt_bgr=shirt, shorts_bgr=shorts, skin_bgr=skin)))
+    return tuple(out)
 
 
 def synthesize(config: SynthConfig, seed=0, preset=None):
@@ -420,15 +477,21 @@ def synthesize(config: SynthConfig, seed=0, preset=None):
                          > np.linalg.norm(j[JOINT_INDEX["r_hip"]] - c.C) for c, j in zip(cams, j3)])
     kp = noisy_keypoints(j2, height_px, config.noise, rng, far_side_left=far_left)
     return SynthClip(config=config, seed=int(seed), motion=motion, cameras=cams, joints2d_px=j2,
-                     keypoints_px=kp, athlete_height_px=height_px, lane_y_m=lane_y, preset=preset)
+                     keypoints_px=kp, athlete_height_px=height_px, lane_y_m=lane_y, preset=preset,
+                     rivals=simulate_rivals(config, seed, motion) if config.rivals else ())
 
 
 def _render_chunk(args):
-    frames_dir, indices, cam_dicts, joints, stature, style, seeds, size = args
-    for i, cd, j, s in zip(indices, cam_dicts, joints, seeds):
+    frames_dir, indices, cam_dicts, joints, stature, style, seeds, size, rivals = args
+    for n, (i, cd, j, s) in enumerate(zip(indices, cam_dicts, joints, seeds)):
         cam = Camera.from_dict(cd, image_size=size)
         img = render_background(cam, style=style)
-        render_runner(img, cam, j, stature, style)
+        runners = [(j, stature, style)] + [(rj[n], rs, rst) for rj, rs, rst in rivals]
+        if len(runners) > 1:  # the farthest first: nearer runners hide those behind them
+            pelvis = JOINT_INDEX["pelvis"]
+            runners.sort(key=lambda r: -float(np.linalg.norm(r[0][pelvis] - cam.C)))
+        for rj, rs, rst in runners:
+            render_runner(img, cam, rj, rs, rst)
         img = finish_image(img, np.random.default_rng(s), style)
         ok = cv2.imwrite(str(Path(frames_dir) / f"{i:06d}.jpg"), img,
                          [cv2.IMWRITE_JPEG_QUALITY, int(style.jpeg_quality)])
@@ -446,7 +509,8 @@ def _render_all(clip: SynthClip, frames_dir: Path, jobs):
     chunks = np.array_split(np.arange(n), jobs * 4 if jobs > 1 else 1)
     tasks = [(str(frames_dir), list(map(int, ch)), [cam_dicts[i] for i in ch],
               clip.motion.joints_track_m[ch], cfg.stature_m, cfg.render, list(seeds[ch]),
-              cfg.image_size) for ch in chunks if len(ch)]
+              cfg.image_size, [(r.motion.joints_track_m[ch], r.motion.anthropometry.stature_m, r.style)
+                               for r in clip.rivals]) for ch in chunks if len(ch)]
     if jobs == 1:
         for t in tasks:
             _render_chunk(t)
@@ -475,8 +539,13 @@ def write_clip(clip: SynthClip, out_dir, images=True, jobs=None, overwrite=False
             "fps": cfg.fps, "image_size": list(cfg.image_size), "athlete_lane": cfg.athlete_lane,
             "lane_width_m": STANDARD_TRACK.lane_width_m, "n_frames": cfg.n_frames,
             "generator": {"name": "probreg.synth", "preset": clip.preset, "seed": clip.seed,
-                          "style": cfg.style},
+                          "style": cfg.style, **({"rivals": len(clip.rivals)} if clip.rivals else {})},
         })
+        if clip.rivals:  # the other runners' truth: lanes, statures, kits and joints (R, F, 17, 3)
+            np.save(gt / "rivals_joints3d.npy", np.stack([r.motion.joints_track_m for r in clip.rivals]))
+            write_json(gt / "rivals.json", {"rivals": [
+                {"lane": r.lane, "stature_m": r.motion.anthropometry.stature_m, "shirt_bgr": list(r.style.shirt_bgr),
+                 "shorts_bgr": list(r.style.shorts_bgr), "skin_bgr": list(r.style.skin_bgr)} for r in clip.rivals]})
         write_keypoints_json(tmp / "keypoints2d.json", clip.keypoints_px)
         write_json(gt / "cameras.json", {"frames": [dict(frame=i, **c.to_dict())
                                                     for i, c in enumerate(clip.cameras)]})

@@ -237,3 +237,42 @@ def test_a_rail_camera_moves_along_the_track_at_its_share_of_the_runners_speed()
         CameraSetup(rail_frac=-0.2)
     cfg, frac, name = rail_config(RAIL_SEEDS[4])
     assert frac == 1.0 and cfg.camera.rail_frac == 1.0 and name.startswith(f"rail_{RAIL_SEEDS[4]}_f1_")
+
+
+def test_rivals_run_beside_the_athlete_and_leave_the_athletes_clip_as_it_was(tmp_path):
+    """A race: other runners in the nearest lanes, close to the athlete (2.5 m ahead or behind at
+    the start, speeds within 3 %), drawn into the frames in other kits, their truth written
+    apart; the athlete, cameras and keypoints are those of the same clip without them, and a
+    clip without rivals is written as before (no rival files, no 'rivals' key)."""
+    from dataclasses import replace
+
+    from probreg.geometry import lane_center_y
+    from probreg.sim.synth import RIVAL_KITS, rival_lanes
+
+    cfg = replace(config_from_preset("run", 21, n_frames=6), image_size=(480, 270))
+    alone = synthesize(cfg, seed=21)
+    race = synthesize(replace(cfg, rivals=3), seed=21)
+    assert np.array_equal(alone.keypoints_px, race.keypoints_px, equal_nan=True)
+    assert np.array_equal(alone.motion.joints_track_m, race.motion.joints_track_m)
+    assert all(np.array_equal(a.R, b.R) and np.array_equal(a.C, b.C) for a, b in zip(alone.cameras, race.cameras))
+    lanes = rival_lanes(cfg.athlete_lane, 3)
+    assert [r.lane for r in race.rivals] == lanes and len(set(lanes + [cfg.athlete_lane])) == 4
+    pelvis = JOINT_INDEX["pelvis"]
+    for r in race.rivals:
+        p = r.motion.joints_track_m[:, pelvis]
+        assert np.all(np.abs(p[:, 1] - lane_center_y(r.lane)) < 0.3)  # in its own lane
+        assert abs(p[0, 0] - race.motion.joints_track_m[0, pelvis, 0]) < 2.5 + 0.3  # beside the athlete
+        assert (r.style.shirt_bgr, r.style.shorts_bgr) in RIVAL_KITS
+    write_clip(alone, tmp_path / "alone", jobs=1)
+    write_clip(race, tmp_path / "race", jobs=1)
+    assert not (tmp_path / "alone" / "groundtruth" / "rivals.json").exists()
+    assert "rivals" not in json.loads((tmp_path / "alone" / "clip.json").read_text())["generator"]
+    assert json.loads((tmp_path / "race" / "clip.json").read_text())["generator"]["rivals"] == 3
+    assert np.load(tmp_path / "race" / "groundtruth" / "rivals_joints3d.npy").shape == (3, 6, 17, 3)
+    # the rivals are in the pictures: pixels differ where they are drawn (and only there, mostly)
+    a = cv2.imread(str(tmp_path / "alone" / "frames" / "000003.jpg")).astype(int)
+    b = cv2.imread(str(tmp_path / "race" / "frames" / "000003.jpg")).astype(int)
+    changed = np.abs(a - b).max(axis=2) > 40
+    assert 0.001 < changed.mean() < 0.3
+    with pytest.raises(ValueError, match="rivals"):
+        replace(cfg, rivals=8)
