@@ -44,8 +44,8 @@ TUNING_SEEDS = tuple(range(8101, 8121))
 
 
 def race_clip(alone: Path, root: Path, rivals=3, jobs=None):
-    """The race version of a generated clip ``alone`` (its generator, preset and seed from its
-    ``clip.json``), written once to ``root/<name>`` (reused when there)."""
+    """The race version of a clip ``alone`` of the held-out generator (:mod:`probreg.sim.heldout`;
+    its seed from its ``clip.json``), written once to ``root/<name>`` (reused when there)."""
     from ..sim import synthesize, write_clip
     from ..sim.heldout import heldout_config
 
@@ -54,7 +54,9 @@ def race_clip(alone: Path, root: Path, rivals=3, jobs=None):
         return dst
     meta = json.loads((alone / "clip.json").read_text())
     gen = meta["generator"]
-    cfg, _, _ = heldout_config(int(gen["seed"]), int(meta["n_frames"]))
+    cfg, kind, _ = heldout_config(int(gen["seed"]), int(meta["n_frames"]))
+    if str(gen.get("preset", "")).partition(":")[2] != kind:  # not a clip of the held-out generator
+        raise ValueError(f"{alone}: not a clip of probreg.sim.heldout (preset {gen.get('preset')!r}, expected '...:{kind}')")
     clip = synthesize(replace(cfg, rivals=int(rivals)), seed=int(gen["seed"]), preset=gen["preset"])
     return write_clip(clip, dst, images=True, jobs=jobs)
 

@@ -310,12 +310,13 @@ def _joint_order(path, fmt, names):
     """
     if not isinstance(names, list):
         return None
+    given = sorted(map(str, names))
     own = list(JOINT_NAMES if fmt == "h36m17" else COCO_NAMES)
     other, other_names = ("coco17", COCO_NAMES) if fmt == "h36m17" else ("h36m17", JOINT_NAMES)
-    if sorted(map(str, names)) == sorted(other_names) and sorted(other_names) != sorted(own):
+    if given == sorted(other_names) != sorted(own):
         raise ClipFormatError(f"{path}: 'format' says {fmt} but 'joint_names' are {other}'s names; "
                               f"set \"format\": \"{other}\" (or fix the names)")
-    if names == own or sorted(map(str, names)) != sorted(own):
+    if names == own or given != sorted(own):
         return None
     return np.array([names.index(n) for n in own])
 
@@ -389,17 +390,16 @@ def _check_number(meta, key, path, lo, hi, what):
     return v
 
 
-def _video_length_notes(video, n):
-    """A note when the video's container says it holds fewer or more frames than the clip's ``n``
-    (``clip.json``'s ``n_frames``, else the keypoints'): the frames past the video's end have no
-    image; frames past the clip's end are not read.  Nothing when the container gives no count."""
-    import cv2
+def _video_length_notes(count, video, n):
+    """A note when the video's container says it holds ``count`` frames, fewer or more than the
+    clip's ``n`` (``clip.json``'s ``n_frames``, else the keypoints'): the frames past the video's
+    end have no image; frames past the clip's end are not read.  Nothing without a count (0).
 
-    cap = cv2.VideoCapture(str(video))
-    try:
-        count = int(cap.get(cv2.CAP_PROP_FRAME_COUNT)) if cap.isOpened() else 0
-    finally:
-        cap.release()
+    >>> _video_length_notes(20, "v.mp4", 40)
+    ['v.mp4: 20 frames, the clip 40 (clip.json n_frames or the keypoints): frames 20 to 39 have no image (status bad_image)']
+    >>> _video_length_notes(0, "v.mp4", 40), _video_length_notes(40, "v.mp4", 40)
+    ([], [])
+    """
     if count <= 0 or count == n:
         return []
     if count < n:
@@ -410,7 +410,8 @@ def _video_length_notes(video, n):
 
 
 def _actual_image_size(frame_paths, video):
-    """``((W, H), source path)`` of the video or the first readable frame, or None."""
+    """``((W, H), source path, frame count)`` of the video (its container's count, 0 when it gives
+    none) or of the first readable frame (count None), or None."""
     import cv2
 
     if video is not None:
@@ -418,7 +419,8 @@ def _actual_image_size(frame_paths, video):
         try:
             if cap.isOpened():
                 w, h = int(cap.get(cv2.CAP_PROP_FRAME_WIDTH)), int(cap.get(cv2.CAP_PROP_FRAME_HEIGHT))
-                return ((w, h), video) if w > 0 and h > 0 else None
+                count = max(int(cap.get(cv2.CAP_PROP_FRAME_COUNT)), 0)
+                return ((w, h), video, count) if w > 0 and h > 0 else None
         finally:
             cap.release()
         return None
@@ -427,9 +429,7 @@ def _actual_image_size(frame_paths, video):
             continue
         img = cv2.imread(str(p), cv2.IMREAD_UNCHANGED)
         if img is not None:
-            return (img.shape[1], img.shape[0]), p
-        return None
-    return None
+            return (img.shape[1], img.shape[0]), p, None
 
 
 def load_clip(path, min_score=0.0):
@@ -528,11 +528,11 @@ def load_clip(path, min_score=0.0):
         notes.append(f"{frame_dir}: no image for {len(missing)} of {n} frames (first: frame {missing[0]}); "
                      f"their status is missing_image")
     video = path / "video.mp4"
-    if not frame_paths and video.exists() and n:
-        notes += _video_length_notes(video, n)
     actual = _actual_image_size(frame_paths, video if (not frame_paths and video.exists()) else None)
+    if actual is not None and actual[2] is not None and n:
+        notes += _video_length_notes(actual[2], video, n)
     if actual is not None and tuple(actual[0]) != (w, h):
-        (aw, ah), src = actual
+        (aw, ah), src, _ = actual
         raise ClipFormatError(f"{cj}: 'image_size' is [{w}, {h}] but {src} is {aw}x{ah} pixels "
                               f"(expected [width, height] of the frames)")
     return Clip(path=path, fps=fps, image_size=(w, h), keypoints_px=kp, frame_paths=frame_paths,

@@ -426,22 +426,21 @@ def rival_lanes(athlete_lane, n, n_lanes=STANDARD_TRACK.n_lanes):
     return order[:n]
 
 
-def simulate_rivals(config: SynthConfig, seed, motion: RunnerMotion):
+def simulate_rivals(config: SynthConfig, seed, motion: RunnerMotion, start_x_m):
     """``config.rivals`` other runners next to the athlete (:func:`rival_lanes`): the same running
     style, speeds within 3 % of the athlete's, 2.5 m ahead or behind at most (a close race, where
     they overlap the athlete in the image most), statures 1.60-1.95 m, a kit from
     :data:`RIVAL_KITS` and a skin tone from :data:`RIVAL_SKINS`.  Their random numbers are their
-    own, so the athlete, the cameras and the keypoints are those of the clip without rivals."""
+    own, so the athlete, the cameras and the keypoints are those of the clip without rivals.
+    ``start_x_m``: where the athlete starts (the rivals start within 2.5 m of it)."""
     out = []
-    duration = config.n_frames / config.fps
-    start_x = config.mid_x_m - motion.gait.speed_mps * duration / 2
     for k, lane in enumerate(rival_lanes(config.athlete_lane, int(config.rivals))):
         rng = np.random.default_rng([int(seed), 611953, k])
         anthro = Anthropometry.from_stature(_u(rng, 1.60, 1.95), rng=rng)
         gait = gait_for_style(config.style, rng=rng, speed_mps=motion.gait.speed_mps * _u(rng, 0.97, 1.03))
         lane_y = float(lane_center_y(lane)) + rng.uniform(-0.15, 0.15)
         m = simulate_runner(anthro, gait, config.n_frames, config.fps, rng=rng,
-                            start_x_m=start_x + _u(rng, -2.5, 2.5), lane_y_m=lane_y, start_phase=rng.uniform())
+                            start_x_m=start_x_m + _u(rng, -2.5, 2.5), lane_y_m=lane_y, start_phase=rng.uniform())
         shirt, shorts = RIVAL_KITS[int(rng.integers(len(RIVAL_KITS)))]
         skin = RIVAL_SKINS[int(rng.integers(len(RIVAL_SKINS)))]
         out.append(Rival(lane=lane, motion=m,
@@ -478,7 +477,7 @@ def synthesize(config: SynthConfig, seed=0, preset=None):
     kp = noisy_keypoints(j2, height_px, config.noise, rng, far_side_left=far_left)
     return SynthClip(config=config, seed=int(seed), motion=motion, cameras=cams, joints2d_px=j2,
                      keypoints_px=kp, athlete_height_px=height_px, lane_y_m=lane_y, preset=preset,
-                     rivals=simulate_rivals(config, seed, motion) if config.rivals else ())
+                     rivals=simulate_rivals(config, seed, motion, start_x) if config.rivals else ())
 
 
 def _render_chunk(args):

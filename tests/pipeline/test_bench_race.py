@@ -3,6 +3,7 @@
 import json
 
 import numpy as np
+import pytest
 
 from probreg.bench.race import race_clip
 from probreg.io import load_clip
@@ -21,3 +22,14 @@ def test_the_race_version_keeps_the_athlete_keypoints_and_cameras_and_adds_the_f
     assert len(json.loads((race / "groundtruth" / "rivals.json").read_text())["rivals"]) == 2
     stamp = (race / "clip.json").stat().st_mtime_ns
     assert race_clip(alone, tmp_path / "race", rivals=2) == race and (race / "clip.json").stat().st_mtime_ns == stamp
+
+
+def test_a_clip_of_another_generator_preset_is_refused(tmp_path):
+    """Only the held-out generator's clips can be rebuilt from their seed; another preset's would
+    come back as a different clip."""
+    from probreg.sim import config_from_preset, synthesize, write_clip
+
+    other = write_clip(synthesize(config_from_preset("run", 8103, n_frames=4), seed=8103, preset="run"),
+                       tmp_path / "run", images=False)
+    with pytest.raises(ValueError, match="not a clip of probreg.sim.heldout"):
+        race_clip(other, tmp_path / "race")
