@@ -37,7 +37,7 @@ from .validation import _heldout_clips, _run_cli
 
 __all__ = ["RIVALS", "TUNING_SEEDS", "race_clip", "run"]
 
-#: other runners in the race clips (7: every other lane of an eight-lane track)
+#: other runners in the race clips (7: one in each other lane of an eight-lane track)
 RIVALS = (3, 7)
 #: the tuning clips of this bench (developed on; the held-out set is only checked)
 TUNING_SEEDS = tuple(range(8101, 8121))
