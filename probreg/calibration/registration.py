@@ -1,10 +1,9 @@
 """Clip-level partial sports field registration: frames -> lanes -> families -> cameras.
 
-The broadcast camera is static over a clip, so one scalar (camera height by
-default) selects a family member in every frame.  This module runs lane
-detection over a clip, smooths the vanishing point over time, builds every
-frame's family, keeps lane-line indices consistent across frames and
-anchors them to the athlete's lane.
+The broadcast camera is static over a clip, so one scalar (camera height by default) selects a family
+member in every frame.  This module runs lane detection over a clip, smooths the vanishing point over
+time, builds every frame's family, keeps lane-line indices consistent across frames and anchors them
+to the athlete's lane.
 """
 
 from __future__ import annotations
@@ -19,6 +18,7 @@ from ..io.clip import Clip
 from ..lanes import (
     FrameLanes,
     LaneDetectorConfig,
+    merged_lines_note,
     smooth_vanishing_points,
     split_shots,
     line_straightness_px,
@@ -531,7 +531,7 @@ def _track_sized(frames, image_size, config, keypoints_px, warmup=0):
 
 def left_out_notes(reg: ClipRegistration):
     """The input notes about frames left out of the lane step (status ``bad_image``): images whose
-    size is not the clip's, and images that do not decode (a damaged file, a video frame).
+    size is not the clip's, and images that do not decode (a damaged file, a video frame); far lines merged (one note).
 
     >>> from probreg.lanes import FrameLanes
     >>> fls = [FrameLanes(status="bad_image", frame=3, extra={"image_size_px": [960, 540]}),
@@ -552,7 +552,7 @@ def left_out_notes(reg: ClipRegistration):
     if broken:
         notes.append(f"{len(broken)} frame image(s) could not be decoded (first: frame {broken[0]}): no lanes there, "
                      "status bad_image or bridged_bad_image")
-    return notes
+    return notes + [n for n in (merged_lines_note(reg.frame_lanes),) if n]
 
 
 def register_clip(clip: Clip, config: LaneDetectorConfig = LaneDetectorConfig(), smooth=True,

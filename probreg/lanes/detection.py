@@ -17,6 +17,7 @@ from .measure import (
     _measure_lines,
     _median,
     _merge_segments,
+    _ridge_widths,
     _robust_fit,
     _sagitta,
     _segments,
@@ -38,7 +39,7 @@ from .vanishing import (
     lines_through_point,
 )
 
-__all__ = ["detect_lanes"]
+__all__ = ["detect_lanes", "merged_lines_note"]
 
 
 # --------------------------------------------------------------------------- main entry
@@ -76,6 +77,18 @@ def detect_lanes(image_bgr, config: LaneDetectorConfig = LaneDetectorConfig(), f
     if not faint.ok:
         return fl
     return replace(faint, extra={**faint.extra, "low_contrast_threshold": low})
+
+
+def merged_lines_note(frame_lanes):
+    """The input note about frames whose far lane lines merged into one ridge, left out
+    (:func:`_merged_ends`), or None.
+
+    >>> merged_lines_note([FrameLanes(status="ok", frame=6, extra={"merged_lines": 1}), FrameLanes(status="no_lines")])
+    'the far lane lines merge into one ridge in 1 frame(s) (first: frame 6): that ridge is left out, the nearer lines used'
+    """
+    merged = [fl.frame for fl in frame_lanes if fl.extra.get("merged_lines")]
+    return (f"the far lane lines merge into one ridge in {len(merged)} frame(s) (first: frame {merged[0]}): that ridge "
+            "is left out, the nearer lines used") if merged else None
 
 
 def low_contrast_threshold(image_bgr, config: LaneDetectorConfig = LaneDetectorConfig()):
@@ -118,7 +131,8 @@ def _detect(image_bgr, config, frame, dist, focal_px, exclude):
         candidates = [(_fit_line(p), p, L) for _, p, L in
                       ((c[0], _undistort_px(c[1], dist, focal_px, size), c[2]) for c in candidates)]
         fl = replace(fl, undistorted=True)
-    return _pencil_from_candidates(candidates, fl, config)
+        image_bgr = None  # the support points are no longer where the image shows them
+    return _pencil_from_candidates(candidates, fl, config, image_bgr)
 
 
 def _measure_candidates(image_bgr, endpoint_sets, config, distinct=False, exclude=None):
@@ -230,7 +244,10 @@ def _drop_mixed(cands, frac, reach=20.0):
     return [c for c, ok in zip(cands, keep) if ok]
 
 
-def _pencil_from_candidates(cands, fl, cfg):
+def _pencil_from_candidates(cands, fl, cfg, image=None):
+    """The frame's ordered pencil of lane lines from its measured candidates (``FrameLanes``).
+    With ``image`` (the frame the candidates were measured in), lines at either end of the
+    pencil that are two lines merged into one ridge are left out (:func:`_merged_ends`)."""
     cands = _drop_mixed(cands, cfg.max_rms_gap_frac, 2 * cfg.profile_half_px)
     if len(cands) < 2:
         return replace(fl, status="too_few_lines")
@@ -286,29 +303,93 @@ def _pencil_from_candidates(cands, fl, cfg):
     if not (np.all(np.isfinite(coord)) and np.all(np.isfinite(v_unit))):
         # a degenerate pencil (lines merging into one, e.g. a grazing view): no lane geometry
         return replace(fl, status="too_few_lines", extra={**fl.extra, "degenerate_pencil": True})
+
+    def without(drop):
+        # the pencil again without the lines at positions ``drop`` of ``order``: the vanishing
+        # point, the lines through it, their order and indices
+        keep = np.delete(order, drop)  # the other lines, in their order
+        kept = [sets[k] for k in np.sort(keep)]
+        v, cv, sg = _refine_vp(kept, v_unit, size)
+        lp, rs = lines_through_point(kept, v, size)
+        co = _pencil_coordinate(lp, v, size)
+        od = np.searchsorted(np.sort(keep), keep)  # the same order, in the new sets' numbering
+        return (kept, v, cv, sg, lp, rs, co, od, *assign_line_indices(co[od], cfg.max_missing_lines))
+
     idx, spacing = assign_line_indices(coord[order], cfg.max_missing_lines)
+    merged = _merged_ends([sets[o] for o in order], image) if image is not None else []
+    if merged:
+        # the farthest lines blurred into one ridge between them (a low grazing camera): left
+        # out, the nearer lines carry the pencil, and the frame says so
+        fl = replace(fl, extra={**fl.extra, "merged_lines": len(merged)})
+        if len(order) - len(merged) < cfg.min_lines:
+            return replace(fl, status="too_few_lines")
+        sets, v_unit, cov, sigma, lines_px, res, coord, order, idx, spacing = without(merged)
     while (drop := _off_comb(coord[order], idx, spacing, cfg.max_missing_lines)) is not None:
         # a line off the lanes' equally spaced comb (the infield's edge, a far kerb) shifted
         # every index; without it, the vanishing point and the lines again
-        keep = np.delete(order, drop)  # the other lines, in their order
-        sets = [sets[k] for k in np.sort(keep)]
-        v_unit, cov, sigma = _refine_vp(sets, v_unit, size)
-        lines_px, res = lines_through_point(sets, v_unit, size)
-        coord = _pencil_coordinate(lines_px, v_unit, size)
-        order = np.searchsorted(np.sort(keep), keep)  # the same order, in the new sets' numbering
-        idx, spacing = assign_line_indices(coord[order], cfg.max_missing_lines)
+        sets, v_unit, cov, sigma, lines_px, res, coord, order, idx, spacing = without(drop)
     lanes = tuple(LaneLine(line=lines_px[o], points_px=sets[o], rms_px=float(np.sqrt(np.mean(res[o] ** 2))),
                            index=int(k)) for o, k in zip(order, idx))
     spacing_px = (_spacing_residual_px(lanes, coord[order], idx, v_unit, size) if len(lanes) >= 4
                   else float("nan"))
     return replace(fl, status="ok", lines=lanes, vanishing_point=_from_unit(v_unit, size), vp_cov=cov,
-                   spacing_residual_px=spacing_px, extra={"vp_unit": v_unit, "vp_sigma_px": sigma})
+                   spacing_residual_px=spacing_px, extra={"vp_unit": v_unit, "vp_sigma_px": sigma,
+                                                        **({"merged_lines": len(merged)} if merged else {})})
 
 
 #: comb misfit (RMS, in units of the mean step per index) above which :func:`_off_comb` looks
 #: for a line to drop: twice the largest misfit of a clean frame on the tuning clips (0.1-2.3 %
 #: over grazing, stand, steep and lens views); a merged pair of far lines gives 3-9 %
 COMB_MISFIT_FRAC = 0.05
+
+
+#: a line at an end of the pencil whose ridge is this many times as wide as its neighbour's is two
+#: lines merged into one (:func:`_merged_ends`)
+MERGED_WIDTH_RATIO = 2.5
+#: ... and at least this wide (RMS, px): narrower ridges are the blur's, whatever their ratio
+MERGED_MIN_WIDTH_PX = 1.0
+
+
+def _merged_ends(sets, image, ratio=MERGED_WIDTH_RATIO, min_px=MERGED_MIN_WIDTH_PX):
+    """Positions (in ``sets``' order across the track) of lines at either end of the pencil that
+    are two lines blurred into one ridge, to be left out.
+
+    Where a low grazing camera sees the far lanes 5-6 px apart, the blur can merge the two
+    farthest lines into one clean ridge between them: a line 2-3 px off both, which the comb of
+    equally spaced lines absorbs when it fits within a few per cent (:func:`_off_comb`), and
+    which then moves the frame's family (on a held-out grazing clip in a race, a third of the
+    frames had one: the camera came out 3.8 times too high).  Its width gives it away: one
+    painted line is as wide as its paint and the blur, and the paint of a farther line is never
+    wider than that of a nearer one; two merged lines are as wide as half their distance.  The
+    line at an end whose ridge (:func:`probreg.lanes.measure._ridge_widths`) is ``ratio`` times as
+    wide as its neighbour's and at least ``min_px`` wide is left out, and the new end judged
+    again while three lines are left to judge.  On probreg's grazing renders single lines measured
+    0.5-0.7 px and merged pairs 2.2-2.9 px, nearer lines of steep and wide views grew steadily
+    wider (no ratio above 1.3), and on the seed paper's frames (1.2-2.7 px) no neighbour was
+    more than 1.5 times as wide.
+
+    >>> img = np.full((60, 80, 3), 60, np.uint8)
+    >>> for y in (10, 20, 31, 43):
+    ...     img[y] = 220                                    # four single lines
+    >>> for r, v in zip(range(49, 56), (120, 180, 215, 220, 215, 180, 120)):
+    ...     img[r] = v                                      # and two merged into one ridge
+    >>> line = lambda y: np.column_stack([np.arange(5.0, 75), np.full(70, float(y))])
+    >>> _merged_ends([line(y) for y in (10, 20, 31, 43, 52)], img)
+    [4]
+    >>> _merged_ends([line(y) for y in (10, 20, 31, 43)], img)
+    []
+    """
+    w = _ridge_widths(image, sets)
+    keep, out = list(range(len(sets))), []
+    while len(keep) >= 3:
+        for end, nb in ((keep[0], keep[1]), (keep[-1], keep[-2])):
+            if np.isfinite(w[end]) and w[end] >= min_px and w[end] > ratio * w[nb]:
+                out.append(end)
+                keep.remove(end)
+                break
+        else:
+            break
+    return sorted(out)
 
 
 def _off_comb(coord, idx, resid, max_missing, frac=COMB_MISFIT_FRAC):

@@ -105,7 +105,7 @@ def track_lanes(frames, config: LaneDetectorConfig = LaneDetectorConfig(), keypo
                     extra["low_contrast_threshold"] = low
                 fl = _pencil_from_candidates(_dedupe(cands, cfg),
                                              FrameLanes(status="no_lines", image_size=size, frame=i,
-                                                        n_curved=n_curved, extra=extra), cfg)
+                                                        n_curved=n_curved, extra=extra), cfg, img)
                 if not fl.ok or len(fl.lines) < len(prev.lines) - 1 or \
                         max(ln.rms_px for ln in fl.lines) > _track_rms_bound(prev, config):
                     fl = None
