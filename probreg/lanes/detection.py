@@ -348,6 +348,9 @@ COMB_MISFIT_FRAC = 0.05
 MERGED_WIDTH_RATIO = 2.5
 #: ... and at least this wide (RMS, px): narrower ridges are the blur's, whatever their ratio
 MERGED_MIN_WIDTH_PX = 1.0
+#: ... and nearer its neighbour than this (px): two lines the blur merges are a few px apart, and where
+#: lines crowd that much the next one found is within a few steps (lines between may be missed)
+MERGED_MAX_GAP_PX = 40.0
 
 
 def _merged_ends(sets, image, ratio=MERGED_WIDTH_RATIO, min_px=MERGED_MIN_WIDTH_PX):
@@ -363,7 +366,8 @@ def _merged_ends(sets, image, ratio=MERGED_WIDTH_RATIO, min_px=MERGED_MIN_WIDTH_
     wider than that of a nearer one; two merged lines are as wide as half their distance.  The
     line at an end whose ridge (:func:`probreg.lanes.measure._ridge_widths`) is ``ratio`` times as
     wide as its neighbour's and at least ``min_px`` wide is left out, and the new end judged
-    again while three lines are left to judge.  On probreg's grazing renders single lines measured
+    again while three lines are left to judge; only ends within :data:`MERGED_MAX_GAP_PX` of their
+    neighbour are judged (the widths are read where needed: most views have no such line).  On probreg's grazing renders single lines measured
     0.5-0.7 px and merged pairs 2.2-2.9 px, nearer lines of steep and wide views grew steadily
     wider (no ratio above 1.3), and on the seed paper's frames (1.2-2.7 px) no neighbour was
     more than 1.5 times as wide.
@@ -379,11 +383,19 @@ def _merged_ends(sets, image, ratio=MERGED_WIDTH_RATIO, min_px=MERGED_MIN_WIDTH_
     >>> _merged_ends([line(y) for y in (10, 20, 31, 43)], img)
     []
     """
-    w = _ridge_widths(image, sets)
-    keep, out = list(range(len(sets))), []
+    keep, out, widths = list(range(len(sets))), [], {}
+
+    def width(k):
+        if k not in widths:
+            widths[k] = float(_ridge_widths(image, [sets[k]])[0])
+        return widths[k]
+
     while len(keep) >= 3:
         for end, nb in ((keep[0], keep[1]), (keep[-1], keep[-2])):
-            if np.isfinite(w[end]) and w[end] >= min_px and w[end] > ratio * w[nb]:
+            # only a line near its neighbour can be a merged pair the profile holds (a pair the
+            # blur merges is a few px apart, its neighbour within a few of its widths)
+            near = abs(np.r_[np.mean(sets[end], 0), 1.0] @ _fit_line(sets[nb])) < MERGED_MAX_GAP_PX
+            if near and width(end) >= min_px and width(end) > ratio * width(nb):
                 out.append(end)
                 keep.remove(end)
                 break

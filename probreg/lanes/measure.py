@@ -429,11 +429,13 @@ def _ridge_widths(image_bgr, point_sets, max_profiles=24, half_px=6):
 
     Each profile (an image column for a line closer to horizontal, a row otherwise, ``half_px``
     either side of the point) is read from its brightest sample within a pixel of the point
-    outwards, while the luma keeps falling and stays above 15 % of the peak's contrast over the
-    profile's lowest sample: the stretch stops at the valley towards a neighbouring line.  One
-    painted line is as wide as its paint and the blur (an RMS of 0.3-0.6 px on rendered 720p
-    frames, far lines); two lines the blur has merged into one ridge are as wide as their
-    distance (about half the local lane step).  NaN for a line without a readable profile.
+    outwards, while above 15 % of the peak's contrast over that side's own background (its outer
+    two samples: a line on the infield's edge has a darker surface on one side), and not up a
+    neighbouring line the profile resolves (once it has dipped below half the contrast).  One
+    painted line is as wide as its paint and the blur (an RMS of 0.5-0.7 px on probreg's 720p
+    renders of far lines); two lines the blur has merged into one ridge are as wide as about
+    half their distance.  All lines' profiles are read and walked in one batch.  NaN for a line
+    without a readable profile.
 
     >>> img = np.full((40, 60, 3), 60, np.uint8)
     >>> img[10, :] = 220                                   # one thin line
@@ -445,9 +447,8 @@ def _ridge_widths(image_bgr, point_sets, max_profiles=24, half_px=6):
     [0.0, 1.68]
     """
     h, w = image_bgr.shape[:2]
-    pixels = image_bgr.reshape(-1, 3)
     offs = np.arange(-half_px, half_px + 1)
-    out = np.full(len(point_sets), np.nan)
+    flat, owner = [], []
     for k, pts in enumerate(point_sets):
         pts = np.asarray(pts, float)
         pts = pts[np.all(np.isfinite(pts), 1)]
@@ -457,43 +458,40 @@ def _ridge_widths(image_bgr, point_sets, max_profiles=24, half_px=6):
         a, b, _ = _fit_line(pts)
         ax = 0 if abs(b) >= abs(a) else 1  # read columns (x fixed) for a line closer to horizontal
         major = np.round(pts[:, ax]).astype(np.int64)
-        centre = pts[:, 1 - ax]
-        minor = np.round(centre).astype(np.int64)[:, None] + offs[None, :]
+        minor = np.round(pts[:, 1 - ax]).astype(np.int64)[:, None] + offs[None, :]
         ok = (major >= 0) & (major <= (w if ax == 0 else h) - 1) & (minor[:, 0] >= 0) & \
              (minor[:, -1] <= (h if ax == 0 else w) - 1)
-        if not ok.any():
-            continue
-        major, minor = major[ok], minor[ok]
-        X, Y = (np.broadcast_to(major[:, None], minor.shape), minor) if ax == 0 else \
-            (minor, np.broadcast_to(major[:, None], minor.shape))
-        prof = np.take(pixels, (Y * w + X).ravel(), axis=0).reshape(minor.shape + (3,)) @ _LUMA_BGR
-        rows = np.arange(len(prof))
-        cols = np.arange(prof.shape[1])[None, :]
-        mid = half_px + np.argmax(prof[:, half_px - 1:half_px + 2], 1) - 1
-        top = prof[rows, mid]
-        # each side's own background (the outer two samples): a line on the edge between the
-        # infield and the track has a darker surface on one side
-        base = np.where(cols < mid[:, None], prof[:, :2].mean(1)[:, None], prof[:, -2:].mean(1)[:, None])
-        inside = np.zeros(prof.shape, bool)
-        inside[rows, mid] = True
-        for step in (-1, 1):  # outwards from the peak while above the level, and not up a resolved neighbour
-            b = base[:, 0] if step < 0 else base[:, -1]
-            level, half = b + 0.15 * (top - b), b + 0.5 * (top - b)
-            cur, alive, low = mid.copy(), np.ones(len(prof), bool), top.copy()
-            for _ in range(half_px):
-                nxt = cur + step
-                alive &= (nxt >= 0) & (nxt < prof.shape[1])
-                nv = prof[rows, np.clip(nxt, 0, prof.shape[1] - 1)]
-                alive &= (nv > level) & ((nv <= prof[rows, np.clip(cur, 0, prof.shape[1] - 1)]) | (low > half))
-                inside[rows[alive], nxt[alive]] = True
-                low = np.where(alive, np.minimum(low, nv), low)
-                cur = np.where(alive, nxt, cur)
-        wts = np.where(inside, np.maximum(prof - base, 0.0), 0.0)
-        s = wts.sum(1)
-        good = (top > base[:, 0]) & (top > base[:, -1]) & (s > 0)
-        if not good.any():
-            continue
-        m = (wts * offs).sum(1) / np.where(good, s, 1.0)
-        var = (wts * (offs[None, :] - m[:, None]) ** 2).sum(1) / np.where(good, s, 1.0)
-        out[k] = float(np.median(np.sqrt(var[good])))
+        major, minor = major[ok, None], minor[ok]
+        flat.append((minor * w + major) if ax == 0 else (major * w + minor))
+        owner.append(np.full(len(minor), k))
+    out = np.full(len(point_sets), np.nan)
+    if not flat or not sum(len(f) for f in flat):
+        return out
+    idx, owner = np.concatenate(flat), np.concatenate(owner)
+    prof = np.take(image_bgr.reshape(-1, 3), idx.ravel(), axis=0).reshape(idx.shape + (3,)) @ _LUMA_BGR
+    n, m = prof.shape
+    rows, cols = np.arange(n), np.arange(m)[None, :]
+    mid = half_px + np.argmax(prof[:, half_px - 1:half_px + 2], 1) - 1
+    top = prof[rows, mid]
+    sides = (prof[:, :2].mean(1), prof[:, -2:].mean(1))
+    base = np.where(cols < mid[:, None], sides[0][:, None], sides[1][:, None])
+    inside = cols == mid[:, None]
+    for step, b in zip((-1, 1), sides):  # outwards from the peak
+        level, half = b + 0.15 * (top - b), b + 0.5 * (top - b)
+        cur, alive, low = mid.copy(), np.ones(n, bool), top.copy()
+        for _ in range(half_px):
+            nxt = np.clip(cur + step, 0, m - 1)
+            nv = prof[rows, nxt]
+            alive &= (nxt != cur) & (nv > level) & ((nv <= prof[rows, cur]) | (low > half))
+            inside[rows[alive], nxt[alive]] = True
+            low = np.where(alive, np.minimum(low, nv), low)
+            cur = np.where(alive, nxt, cur)
+    wts = np.where(inside, np.maximum(prof - base, 0.0), 0.0)
+    tot = wts.sum(1)
+    good = (top > sides[0]) & (top > sides[1]) & (tot > 0)
+    tot = np.where(good, tot, 1.0)
+    c = (wts * offs).sum(1) / tot
+    rms = np.sqrt((wts * (offs[None, :] - c[:, None]) ** 2).sum(1) / tot)
+    for k in np.unique(owner[good]):
+        out[k] = float(np.median(rms[good & (owner == k)]))
     return out
