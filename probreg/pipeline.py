@@ -477,6 +477,8 @@ def _run_clip(clip_dir, out_dir, options, log, protect, extra_files):
     diag["leg_image_px"] = legs_px = limb_image_length(model.kp)  # thighs and shanks: long enough to read?
     diag["keypoints_on_athlete"] = on_athlete = _on_athlete(reg)  # are the keypoints on these images' athlete?
     diag["trunk_down_fraction"] = trunk_down = trunk_down_fraction(model.kp)  # y pointing up, not down?
+    # frames whose two farthest lane lines merged into one ridge, left out (lanes.detection._merged_ends)
+    diag["merged_far_lines_frames"] = [i for i, fl in enumerate(reg.frame_lanes) if fl.extra.get("merged_lines")]
     verdict, reasons = clip_verdict(  # over the frames of the shot estimated (all but with --shot all)
         reg.shots.frames[1] - reg.shots.frames[0], calibrated=sum(c is not None for c in cam_list),
         frames_with_angles=n_angle, cuts=reg.shots.cuts if reg.shots.chosen is None else None,

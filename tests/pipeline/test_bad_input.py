@@ -268,6 +268,7 @@ def test_keypoints_of_other_images_are_flagged_and_the_clips_own_are_not(clip, t
     assert not any(r.startswith("keypoints off the athlete") for r in run["verdict_reasons"])
     assert run["diagnostics"]["trunk_down_fraction"] == 0.0
     assert not any(r.startswith("skeleton upside down") for r in run["verdict_reasons"])
+    assert run["diagnostics"]["merged_far_lines_frames"] == []  # a view whose lanes the blur keeps apart
     doc = json.loads((clip / "keypoints2d.json").read_text())
     for f in doc["frames"]:
         if f["keypoints"]:
