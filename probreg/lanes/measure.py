@@ -432,9 +432,9 @@ def _ridge_widths(image_bgr, point_sets, max_profiles=24, half_px=6):
     outwards, while above 15 % of the peak's contrast over that side's own background (its outer
     two samples: a line on the infield's edge has a darker surface on one side), and not up a
     neighbouring line the profile resolves (once it has dipped below half the contrast).  One
-    painted line is as wide as its paint and the blur (an RMS of 0.5-0.7 px on probreg's 720p
-    renders of far lines); two lines the blur has merged into one ridge are as wide as about
-    half their distance.  All lines' profiles are read and walked in one batch.  NaN for a line
+    painted line is as wide as its paint and the blur (at most 0.8 px on probreg's renders of far
+    lines, 1.2-2.7 px on the seed paper's frames); two lines the blur has merged into one ridge
+    are as wide as about half their distance (1.2-2.0 px where probreg's renders merge them).  All lines' profiles are read and walked in one batch.  NaN for a line
     without a readable profile.
 
     >>> img = np.full((40, 60, 3), 60, np.uint8)
