@@ -384,23 +384,19 @@ def _merged_ends(sets, image, ratio=MERGED_WIDTH_RATIO, min_px=MERGED_MIN_WIDTH_
     []
     """
     keep, out, widths = list(range(len(sets))), [], {}
-
-    def width(k):
-        if k not in widths:
-            widths[k] = float(_ridge_widths(image, [sets[k]])[0])
-        return widths[k]
-
     while len(keep) >= 3:
-        for end, nb in ((keep[0], keep[1]), (keep[-1], keep[-2])):
-            # only a line near its neighbour can be a merged pair the profile holds (a pair the
-            # blur merges is a few px apart, its neighbour within a few of its widths)
-            near = abs(np.r_[np.mean(sets[end], 0), 1.0] @ _fit_line(sets[nb])) < MERGED_MAX_GAP_PX
-            if near and width(end) >= min_px and width(end) > ratio * width(nb):
-                out.append(end)
-                keep.remove(end)
-                break
-        else:
+        # only a line near its neighbour can be a merged pair the profile holds (a pair the blur
+        # merges is a few px apart, its neighbour within a few of its widths)
+        ends = [(e, nb) for e, nb in ((keep[0], keep[1]), (keep[-1], keep[-2]))
+                if abs(np.r_[np.mean(sets[e], 0), 1.0] @ _fit_line(sets[nb])) < MERGED_MAX_GAP_PX]
+        need = sorted({k for pair in ends for k in pair} - widths.keys())
+        if need:  # the widths not read yet, in one batch
+            widths.update(zip(need, _ridge_widths(image, [sets[k] for k in need])))
+        drop = next((e for e, nb in ends if widths[e] >= min_px and widths[e] > ratio * widths[nb]), None)
+        if drop is None:
             break
+        out.append(drop)
+        keep.remove(drop)
     return sorted(out)
 
 

@@ -434,8 +434,9 @@ def _ridge_widths(image_bgr, point_sets, max_profiles=24, half_px=6):
     neighbouring line the profile resolves (once it has dipped below half the contrast).  One
     painted line is as wide as its paint and the blur (at most 0.8 px on probreg's renders of far
     lines, 1.2-2.7 px on the seed paper's frames); two lines the blur has merged into one ridge
-    are as wide as about half their distance (1.2-2.0 px where probreg's renders merge them).  All lines' profiles are read and walked in one batch.  NaN for a line
-    without a readable profile.
+    are as wide as about half their distance (1.2-2.0 px where probreg's renders merge them).
+    All lines' profiles are read and walked in one batch.  NaN for a line without a readable
+    profile.
 
     >>> img = np.full((40, 60, 3), 60, np.uint8)
     >>> img[10, :] = 220                                   # one thin line
