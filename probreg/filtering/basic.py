@@ -92,6 +92,9 @@ def keypoint_noise_px(keypoints_px, joints=(0, 7, 8)):
 #: the largest frame-to-frame noise correlation :func:`noise_model` fits (beyond it the differences
 #: over 1-3 frames cannot tell the noise's level from its correlation)
 NOISE_RHO_MAX = 0.9
+#: a lag-1 noise correlation from which :func:`noise_model` takes the growth of the variances with
+#: the lag for the trunk's own motion (refitted with it)
+NOISE_RHO_MOTION = 0.8
 
 
 def noise_model(keypoints_px, joints=(0, 7, 8), lags=(1, 2, 3)):
@@ -120,12 +123,15 @@ def noise_model(keypoints_px, joints=(0, 7, 8), lags=(1, 2, 3)):
     """
     kp = np.asarray(keypoints_px, float)[:, list(joints), :2]
     rel = kp[:, 1:] - kp[:, :1]
-    v = []
-    for k in lags:
-        d = rel[k:] - rel[:-k]
-        d = d[np.isfinite(d)]
-        v.append((1.4826 * np.median(np.abs(d))) ** 2 / 2 if len(d) >= 20 else np.nan)
-    v = np.array(v)
+    sd, rho = _ar1_fit(_lag_variances(rel, lags), lags)
+    # a correlation this high says the variances grow with the lag as the trunk's own motion does
+    # (at 25 fps the trunk moves more between frames): refitted with that motion as a part of its own
+    return _with_motion(rel) if rho >= NOISE_RHO_MOTION else (sd, rho)
+
+
+def _ar1_fit(v, lags):
+    """AR(1) noise ``(sd, rho)`` from the variances ``v`` of the differences over ``lags``: least
+    squares in log variance over a grid of ``rho`` (:func:`noise_model`)."""
     if not np.all(np.isfinite(v)) or np.any(v <= 0):
         return float("nan"), 0.0
     r = np.linspace(0.0, NOISE_RHO_MAX, 181)[:, None]
@@ -134,6 +140,53 @@ def noise_model(keypoints_px, joints=(0, 7, 8), lags=(1, 2, 3)):
     cost = np.sum((np.log(v)[None] - np.log(g) - log_s2[:, None]) ** 2, axis=1)
     i = int(np.argmin(cost))
     return float(np.exp(0.5 * log_s2[i])), float(r[i, 0])
+
+
+def _lag_variances(rel, lags):
+    """Robust (MAD) variance of the differences over each lag of joints relative to the pelvis, per
+    coordinate of one joint (halved: the difference of two joints); NaN with fewer than 20."""
+    v = []
+    for k in lags:
+        d = rel[k:] - rel[:-k]
+        d = d[np.isfinite(d)]
+        v.append((1.4826 * np.median(np.abs(d))) ** 2 / 2 if len(d) >= 20 else np.nan)
+    return np.array(v)
+
+
+def _with_motion(rel, lags=(1, 2, 3, 4)):
+    """:func:`noise_model`'s fit with the trunk's own motion as a second part of the variances:
+    ``2 s^2 (1 - r^k) + m k^2`` (AR(1) noise levels off with the lag, motion that is steady over a
+    few frames grows with its square), ``s^2`` and ``m`` non-negative, least squares relative to
+    each variance; ``(s, r)``.
+
+    >>> rng = np.random.default_rng(0)  # spine and thorax drifting 1.6 px a frame from the pelvis, 2 px of noise
+    >>> drift = 1.6 * np.arange(250)[:, None, None] * np.array([1, -1])[None, :, None]
+    >>> rel = drift + rng.normal(0, 2.0 * np.sqrt(2), (250, 2, 2))
+    >>> [round(x, 1) for x in _ar1_fit(_lag_variances(rel, (1, 2, 3)), (1, 2, 3)) + _with_motion(rel)]
+    [6.4, 0.9, 1.8, 0.0]
+    """
+    v = _lag_variances(rel, lags)
+    if not np.all(np.isfinite(v)) or np.any(v <= 0):
+        return float("nan"), 0.0
+    L = np.asarray(lags, float)
+    r = np.linspace(0.0, NOISE_RHO_MAX, 181)[:, None]
+    a1 = 2 * (1 - r ** L[None]) / v[None]  # (R, K): the noise's column per unit s^2, relative
+    a2 = np.broadcast_to(L**2 / v, a1.shape)  # the motion's column per unit m, relative
+    # per r: the unconstrained 2x2 least squares, else the better one-column fit (a part at zero)
+    s11, s12, s22 = np.sum(a1 * a1, 1), np.sum(a1 * a2, 1), np.sum(a2 * a2, 1)
+    b1, b2 = np.sum(a1, 1), np.sum(a2, 1)
+    det = s11 * s22 - s12**2
+    with np.errstate(divide="ignore", invalid="ignore"):
+        both = np.column_stack([(s22 * b1 - s12 * b2) / det, (s11 * b2 - s12 * b1) / det])
+    cands = [both, np.column_stack([b1 / s11, np.zeros_like(b1)]), np.column_stack([np.zeros_like(b2), b2 / s22])]
+    best_cost, best_s2 = np.full(len(r), np.inf), np.zeros(len(r))
+    for x in cands:
+        ok = np.all(np.isfinite(x) & (x >= 0), axis=1)
+        cost = np.sum((a1 * x[:, :1] + a2 * x[:, 1:] - 1) ** 2, axis=1)
+        better = ok & (cost < best_cost)
+        best_cost, best_s2 = np.where(better, cost, best_cost), np.where(better, x[:, 0], best_s2)
+    i = int(np.argmin(best_cost))
+    return float(np.sqrt(best_s2[i])), float(r[i, 0])
 
 
 def hampel(x, half_window=4, n_sigma=3.0, min_scale=1.0):
