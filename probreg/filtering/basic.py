@@ -101,13 +101,16 @@ def noise_model(keypoints_px, joints=(0, 7, 8), lags=(1, 2, 3)):
     """Detector noise of a clip: per-coordinate sd (px) and frame-to-frame correlation.
 
     Uses the trunk joints relative to the pelvis (camera motion cancels, the
-    trunk's own motion over a few frames is small).  For AR(1) noise with sd
+    trunk's own motion over a few frames is mostly small).  For AR(1) noise with sd
     ``s`` and lag-1 correlation ``r``, differences over ``k`` frames have
     variance ``2 s^2 (1 - r^k)`` (doubled again for the difference of two
     joints).  ``r`` and ``s`` are fitted to the robust (MAD) variances at
     ``lags`` by least squares in log variance: two lags alone give a ratio
     that 250 frames measure too loosely (``r`` then wanders towards 1 and
-    ``s`` with it).
+    ``s`` with it).  Where that fit reaches :data:`NOISE_RHO_MOTION`, the growth
+    with the lag is taken for the trunk's own motion as much as the data allow
+    (:func:`_with_motion`, lags 1-4; the AR(1) fit stands where that refit cannot
+    be made, e.g. too few frames for lag 4).
 
     Returns
     -------
@@ -124,9 +127,12 @@ def noise_model(keypoints_px, joints=(0, 7, 8), lags=(1, 2, 3)):
     kp = np.asarray(keypoints_px, float)[:, list(joints), :2]
     rel = kp[:, 1:] - kp[:, :1]
     sd, rho = _ar1_fit(_lag_variances(rel, lags), lags)
+    if rho < NOISE_RHO_MOTION:
+        return sd, rho
     # a correlation this high says the variances grow with the lag as the trunk's own motion does
     # (at 25 fps the trunk moves more between frames): refitted with that motion as a part of its own
-    return _with_motion(rel) if rho >= NOISE_RHO_MOTION else (sd, rho)
+    refit = _with_motion(rel)
+    return refit if np.isfinite(refit[0]) else (sd, rho)
 
 
 def _ar1_fit(v, lags):

@@ -321,6 +321,13 @@ def test_noise_model_tells_the_trunks_own_motion_from_correlated_noise():
         rel = plain[:, [J["spine"], J["thorax"]], :2] - plain[:, [J["pelvis"]], :2]
         fit = _ar1_fit(_lag_variances(rel, (1, 2, 3)), (1, 2, 3))
         assert fit[1] < NOISE_RHO_MOTION and noise_model(plain) == fit
+    # eight frames measure lags 1-3 (20 differences at least) but not lag 4: the AR(1) fit stands
+    short = np.zeros((8, 17, 3))
+    short[:, [J["spine"], J["thorax"]], :2] = 2.5 * np.arange(8)[:, None, None] * np.array([1, -1])[None, :, None]
+    short[..., :2] += np.random.default_rng(0).normal(0, 2.0, (8, 17, 2))
+    rel = short[:, [J["spine"], J["thorax"]], :2] - short[:, [J["pelvis"]], :2]
+    fit = _ar1_fit(_lag_variances(rel, (1, 2, 3)), (1, 2, 3))
+    assert fit[1] >= NOISE_RHO_MOTION and np.isfinite(fit[0]) and noise_model(short) == fit
 
 
 def test_noise_model_on_real_runners_at_25_fps(shared_data):
