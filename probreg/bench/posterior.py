@@ -98,7 +98,7 @@ def score_result(clip_dir, out_dir):
     h = cam_doc["height_m"]
     h_true = float(gt.cameras[0].C[2])
     cams = read_cameras_json(Path(out_dir) / "camera.json")
-    loc, fov = [], []
+    loc, fov, focal = [], [], []
     pel = gt.joints3d_track_m[:, JOINT_INDEX["pelvis"], :2]
     for i, c in cams.items():
         if c is None:
@@ -106,6 +106,7 @@ def score_result(clip_dir, out_dir):
         g = gt.cameras[i]
         loc.append(100 * np.linalg.norm((c.C - g.C)[1:]) / np.linalg.norm(g.C[:2] - pel[i]))
         fov.append(abs(c.fov_deg - g.fov_deg))
+        focal.append(c.K[0, 0] / g.K[0, 0])
     gait = json.loads((Path(out_dir) / "gait.json").read_text())
     gait_scores = {}
     for name, t in true_gait(clip_dir).items():
@@ -124,6 +125,7 @@ def score_result(clip_dir, out_dir):
         "height_in_interval": bool(h["lo"] <= h_true <= h["hi"]),
         "loc_pct": float(np.mean(loc)) if loc else float("nan"),
         "fov_deg": float(np.mean(fov)) if fov else float("nan"),
+        "focal_ratio": float(np.median(focal)) if focal else float("nan"),
         "knee_coverage": float(np.mean(inside)), "n_frames": int(len(inside) // 2),
         **{f"{j}_deg": float(np.mean(angle_scores[j][0])) for j in ("hip", "elbow")},
         **{f"{j}_coverage": float(np.mean(angle_scores[j][1])) for j in ("hip", "elbow")},
