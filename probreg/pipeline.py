@@ -52,6 +52,7 @@ from .io.clip import (FPS_RANGE, MIN_ATHLETE_FRAMES, MIN_ATHLETE_JOINTS, ClipFor
                       with_slow_motion, write_json)
 from .io.frames import has_frames
 from .io.output import atomic_output_dir, prepare_output
+from .io.provenance import software_versions
 from .io.opensim import write_mot, write_trc
 from .io.results import write_angles_csv, write_gait_cycle_csv, write_joints_npz
 from .io.video import VIDEO_SUFFIXES, is_video, link_or_copy, probe_video  # noqa: F401 -- re-exported
@@ -255,7 +256,8 @@ def _write_uncalibrated(clip, reg, side, out_dir, options, error, t0, log, input
                                      "shots": reg.shots.to_dict() if reg.shots is not None else None,
                                      "timings_s": timings, "frame_status": status, "gait_verdict": "uncalibrated",
                                      "keypoint_status": detection_status(clip.keypoints_px),
-                                     "lane_status_counts": counts, "gait_verdict_reasons": []})
+                                     "lane_status_counts": counts, "gait_verdict_reasons": [],
+                                     "software": software_versions()})
         result = RunResult(out_dir=out_dir, model=None, posterior=None, angle_summary=summ, height={},
                            gait={}, diagnostics={}, timings=timings, verdict="uncalibrated",
                            verdict_reasons=tuple(reasons), camera_side=side, frame_status=status)
@@ -526,7 +528,7 @@ def _run_clip(clip_dir, out_dir, options, log, protect, extra_files):
                                      "frame_status": status, "keypoint_status": detection_status(model.raw, model.kp),
                                      "noise_px": model.noise_sd,
                                      "noise_rho": model.noise_rho, "band_noise_ratio": ratio, "n_draws": len(draws),
-                                     "priors": options.priors.describe()})
+                                     "priors": options.priors.describe(), "software": software_versions()})
         if options.report:  # a failure in a process draws its figures again here, and raises as itself
             run_report(tmp / "report.html", clip, result, joints_med, cam_list, rendered={**early(), **figures()})
     if gait_reasons:

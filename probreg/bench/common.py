@@ -55,8 +55,19 @@ class BenchReport:
                 f"Command: `{command}`  ",
                 f"Measured: {_dt.datetime.now(_dt.timezone.utc).strftime('%Y-%m-%d %H:%M UTC')} on "
                 f"{platform.machine()} with {os.cpu_count()} cores, Python {platform.python_version()}, "
-                f"numpy {np.__version__}", ""]
+                f"{_versions_text()}", ""]
         return "\n".join(head) + "\n" + "\n".join(self.sections)
+
+
+def _versions_text():
+    """The installed versions a benchmark's numbers depend on, for its header (``numpy 2.4.6, scipy
+    1.17.1, OpenCV 4.14.0.94, emcee 3.1.6``; :func:`probreg.io.software_versions`)."""
+    from ..io.provenance import software_versions
+
+    v = software_versions()
+    return ", ".join(f"{label} {v[key]}" for key, label in (("numpy", "numpy"), ("scipy", "scipy"),
+                                                            ("opencv", "OpenCV"), ("emcee", "emcee"))
+                     if v.get(key))
 
 
 def verdict_text(verdict, reasons):

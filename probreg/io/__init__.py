@@ -14,6 +14,7 @@ from .clip import (
 )
 from .frames import has_frames, iter_frames, read_frame
 from .keypoints import read_keypoints
+from .provenance import software_versions
 from .results import read_angles_csv, write_angles_csv, write_joints_npz
 
 __all__ = [
@@ -34,4 +35,5 @@ __all__ = [
     "write_angles_csv",
     "write_joints_npz",
     "read_keypoints",
+    "software_versions",
 ]

@@ -172,6 +172,14 @@ def test_run_pipeline_writes_the_result_layout(small_clip, tmp_path):
     # on: 40 frames are less than the 1.5 strides it needs, so none here (the bands as without)
     assert run["band_noise_ratio"] == {}
     assert priors["running_speed"] == "flat up to 12.5 m/s, half-normal of sd 0.5 m/s beyond"
+    # the software that made the result (OpenCV's version changes the lane step's inputs)
+    import cv2
+
+    import probreg
+
+    sw = run["software"]
+    assert sw["probreg"] == probreg.__version__ and sw["numpy"] == np.__version__
+    assert sw["opencv"].split(".")[:3] == cv2.__version__.split(".")[:3]
     # the gait verdict and each gait number's status agree (probreg.inference.gait_check)
     gait = json.loads((out / "gait.json").read_text())
     assert run["gait_verdict"] in ("ok", "unreliable")

@@ -641,3 +641,25 @@ def test_keypoints_lie_on_the_athlete_of_their_own_frames_only(small_clip):
     few = kp[0].copy()
     few[7:] = np.nan
     assert np.isnan(on_athlete_fraction(img, few))
+
+
+def test_global_motion_is_the_same_on_every_opencv_version():
+    """OpenCV 4's phaseCorrelate windowed its (DFT-optimal) inputs in place and the lane step fed each
+    frame's windowed image back as the next frame's previous one; OpenCV 5 does not window in place.
+    The lane step windows explicitly: the caller's arrays stay as they were, the shift is that of the
+    windowed images, and the image kept for the next frame is windowed exactly when OpenCV 4 did."""
+    from probreg.lanes.tracking import _phase_correlate
+
+    rng = np.random.default_rng(0)
+    for shape, optimal in (((180, 320), True), ((181, 321), False)):
+        assert all(cv2.getOptimalDFTSize(n) == n for n in shape) == optimal
+        a = rng.random(shape).astype(np.float32)
+        b = np.roll(a, 3, axis=1)
+        a0, b0 = a.copy(), b.copy()
+        w = cv2.createHanningWindow(shape[::-1], cv2.CV_32F)
+        (dx, dy), resp, kept = _phase_correlate(a, b, w)
+        assert np.array_equal(a, a0) and np.array_equal(b, b0)
+        assert dx == pytest.approx(3.0, abs=0.05) and abs(dy) < 0.05 and resp > 0.5
+        ref_shift, ref_resp = cv2.phaseCorrelate(a0 * w, b0 * w)
+        assert (dx, dy) == tuple(ref_shift) and resp == ref_resp
+        assert np.array_equal(kept, b0 * w if optimal else b0)
