@@ -1,9 +1,9 @@
 """The software a result was made with, written beside it (``run.json``'s ``"software"``).
 
 A result's numbers depend on more than probreg's own version: OpenCV's image operations feed the
-lane lines (0.2.0.dev38: OpenCV 5.1 samples images differently from 4.14 where probreg resizes
-them, and validation clip v08_tele's camera height moved from 4.70 % to 6.18 % off, its knee
-error from 2.37° to 2.35°), and numpy, SciPy and emcee the sampler.  Every result therefore names
+lane lines (0.2.0.dev38: OpenCV 5's phase correlation stopped windowing its inputs in place, and
+until the lane tracking windowed them itself, validation clip v08_tele's camera height moved from
+4.70 % to 6.18 % off, its knee error from 2.37° to 2.35°), and numpy, SciPy and emcee the sampler.  Every result therefore names
 the versions that made it, read from the installed distributions' metadata (no module is
 imported for it: ``importlib.metadata`` reads the installed files).
 """
