@@ -67,3 +67,29 @@ def test_paired_runs_import_the_trees_they_are_given_wherever_the_bench_runs(tmp
     _paired({"baseline": ([sys.executable, "-c", said, str(log)], baseline),
              "this tree": ([sys.executable, "-c", said, str(log)], here)}, 2)
     assert log.read_text().split() == ["baseline", "here", "baseline", "here"]
+
+
+def test_frames_read_like_the_run_go_through_the_runs_reader(small_clip, monkeypatch):
+    """``bench speed`` reports the CPU time of reading the frames the way the lane step does (the
+    prefetching reader of ``io.frames``, its decode thread included): every frame is decoded once,
+    and the CPU comes back as (user, system)."""
+    import cv2
+    import numpy as np
+
+    from probreg.bench.speed import _per_frame, _read_like_the_run
+    from probreg.io import load_clip
+
+    n = load_clip(small_clip).n_frames
+    real, calls = cv2.imread, []
+
+    def counting(path, *args):
+        calls.append(str(path))
+        return real(path, *args)
+
+    monkeypatch.setattr(cv2, "imread", counting)
+    cpu = _read_like_the_run(small_clip)
+    # each frame decoded by the run's reader once (loading the clip reads the first one's size too)
+    assert len(set(calls)) == n and len(calls) <= n + 1
+    assert sorted(set(calls)) == sorted(str(p) for p in load_clip(small_clip).frame_paths)
+    assert np.shape(cpu) == (2,) and np.all(np.asarray(cpu) >= 0) and cpu[0] > 0
+    assert _per_frame((0.5, 0.25), 100) == "5.0 ms user + 2.5 ms system per frame"
