@@ -12,6 +12,7 @@ previous result is left intact); 1 a bug (``--debug`` shows the traceback of any
 from __future__ import annotations
 
 import argparse
+import math
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -304,6 +305,9 @@ def _cmd_import(args):
 
 
 def _parse_floats(text, n, name):
+    """``n`` comma-separated finite numbers of an option (None when it is not given); raises
+    :class:`CliError` naming the option otherwise (``nan`` and ``inf`` parse as floats, but no
+    coordinate or coefficient can be one)."""
     if text is None:
         return None
     try:
@@ -312,6 +316,8 @@ def _parse_floats(text, n, name):
         raise CliError(f"{name} needs {n} comma-separated numbers, got {text!r}") from None
     if len(vals) != n:
         raise CliError(f"{name} needs {n} numbers, got {len(vals)}")
+    if not all(math.isfinite(v) for v in vals):
+        raise CliError(f"{name} needs finite numbers, got {text!r}")
     return vals
 
 

@@ -8,6 +8,7 @@ default.  Unknown keys and values of the wrong type are errors that name the key
 
 from __future__ import annotations
 
+import math
 import tomllib
 from dataclasses import dataclass
 from pathlib import Path
@@ -178,8 +179,8 @@ def _convert(path, key, value):
         return value or None  # '' = not given
     if key.dest == "dist":
         if not isinstance(value, list) or (value and (len(value) != 5 or not all(
-                isinstance(v, (int, float)) and not isinstance(v, bool) for v in value))):
-            raise ConfigError(f"{where} must be [] or five numbers [k1, k2, p1, p2, k3], got {value!r}")
+                isinstance(v, (int, float)) and not isinstance(v, bool) and math.isfinite(v) for v in value))):
+            raise ConfigError(f"{where} must be [] or five numbers [k1, k2, p1, p2, k3], all finite, got {value!r}")
         return ",".join(repr(float(v)) for v in value) if value else None
     raise ConfigError(f"{where}: unsupported value {value!r}")  # pragma: no cover
 

@@ -51,6 +51,7 @@ def test_a_config_saved_with_a_byte_order_mark_reads_the_same(tmp_path):
     ("[priors]\nheight = 3\n", "unknown key 'height' in [priors]"),
     ("[nonsense]\nx = 1\n", "unknown section [nonsense]"),
     ("[lens]\ndist = [0.1, 0]\n", "five numbers"),
+    ("[lens]\ndist = [nan, 0, 0, 0, 0]\n", "all finite, got [nan, 0, 0, 0, 0]"),
     ("[camera]\nside = 'left'\n", "'auto', 'main' or 'far'"),
     ("[camera]\nshot = 'first'\n", "'longest', 'all' or a shot's number"),
     ("[priors\n", "not valid TOML"),
@@ -231,3 +232,18 @@ def test_the_slow_motion_factor_is_an_option_everywhere(tmp_path):
     p = tmp_path / "probreg.toml"
     p.write_text("[camera]\nslow_motion = 3\n")
     assert read_config(p)["slow_motion"] == 3.0
+
+
+@pytest.mark.parametrize("command, needle", [
+    (["calibrate", "--dist=nan,0,0,0,0"], "--dist (k1,k2,p1,p2,k3) needs finite numbers, got 'nan,0,0,0,0'"),
+    (["run", "--dist=0.1,inf,0,0,0"], "--dist (k1,k2,p1,p2,k3) needs finite numbers, got '0.1,inf,0,0,0'"),
+    (["run", "--athlete", "nan,300"], "needs finite numbers, got 'nan,300'"),
+])
+def test_numbers_that_are_not_finite_are_named_before_anything_runs(small_clip, tmp_path, command, needle, capsys):
+    """``nan`` and ``inf`` parse as floats; a lens coefficient or an image point that is one used to
+    reach the lane step (calibrate: 0 of 80 frames calibrated, no word why)."""
+    out = tmp_path / "o"
+    assert main([command[0], str(small_clip), "--out", str(out), *command[1:]]) == 2
+    err = capsys.readouterr().err
+    assert needle in err and "Traceback" not in err
+    assert not out.exists()  # refused before any output
