@@ -200,7 +200,14 @@ def test_run_pipeline_writes_the_result_layout(small_clip, tmp_path):
     assert "keypoints_px" in idata.observed_data and "sample_stats" in idata.groups()
     assert res.diagnostics["steps"] >= 150
     # the report says what sets the metric scale (here: the default stature prior)
-    assert "Metric scale:" in (out / "report.html").read_text(encoding="utf-8")
+    page = (out / "report.html").read_text(encoding="utf-8")
+    assert "Metric scale:" in page
+    # and what its angle bands leave out (keypoint bias, the elbows' mirror solution)
+    import html
+
+    from probreg.report.html import BANDS_LEAVE_OUT
+
+    assert html.escape(BANDS_LEAVE_OUT) in page and "mirror image in depth" in page
 
 
 def test_missing_lanes_still_give_a_posterior_with_wider_bands(small_clip, tmp_path):
