@@ -12,7 +12,6 @@ previous result is left intact); 1 a bug (``--debug`` shows the traceback of any
 from __future__ import annotations
 
 import argparse
-import math
 import sys
 from dataclasses import replace
 from pathlib import Path
@@ -201,8 +200,7 @@ def _shot(text):
     return text
 
 
-def _parse_dist(text):
-    """``--dist k1,k2,p1,p2,k3`` (OpenCV order)."""
+def _parse_dist(text):  # OpenCV's order
     return _parse_floats(text, 5, "--dist (k1,k2,p1,p2,k3)")
 
 
@@ -305,19 +303,15 @@ def _cmd_import(args):
 
 
 def _parse_floats(text, n, name):
-    """``n`` comma-separated finite numbers of an option (None when it is not given); raises
-    :class:`CliError` naming the option otherwise (``nan`` and ``inf`` parse as floats, but no
-    coordinate or coefficient can be one)."""
+    """``n`` comma-separated finite numbers of an option, None when it is not given (else CliError)."""
     if text is None:
         return None
     try:
         vals = [float(v) for v in text.split(",")]
     except ValueError:
-        raise CliError(f"{name} needs {n} comma-separated numbers, got {text!r}") from None
-    if len(vals) != n:
-        raise CliError(f"{name} needs {n} numbers, got {len(vals)}")
-    if not all(math.isfinite(v) for v in vals):
-        raise CliError(f"{name} needs finite numbers, got {text!r}")
+        vals = []
+    if len(vals) != n or not np.all(np.isfinite(vals)):  # nan and inf parse as floats
+        raise CliError(f"{name} needs {n} finite comma-separated numbers, got {text!r}")
     return vals
 
 

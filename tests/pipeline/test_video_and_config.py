@@ -235,9 +235,11 @@ def test_the_slow_motion_factor_is_an_option_everywhere(tmp_path):
 
 
 @pytest.mark.parametrize("command, needle", [
-    (["calibrate", "--dist=nan,0,0,0,0"], "--dist (k1,k2,p1,p2,k3) needs finite numbers, got 'nan,0,0,0,0'"),
-    (["run", "--dist=0.1,inf,0,0,0"], "--dist (k1,k2,p1,p2,k3) needs finite numbers, got '0.1,inf,0,0,0'"),
-    (["run", "--athlete", "nan,300"], "needs finite numbers, got 'nan,300'"),
+    (["calibrate", "--dist=nan,0,0,0,0"], "--dist (k1,k2,p1,p2,k3) needs 5 finite comma-separated numbers, got 'nan,0,0,0,0'"),
+    (["run", "--dist=0.1,inf,0,0,0"], "--dist (k1,k2,p1,p2,k3) needs 5 finite comma-separated numbers, got '0.1,inf,0,0,0'"),
+    (["run", "--athlete", "nan,300"], "needs 2 finite comma-separated numbers, got 'nan,300'"),
+    (["calibrate", "--dist=0.1,0"], "--dist (k1,k2,p1,p2,k3) needs 5 finite comma-separated numbers, got '0.1,0'"),
+    (["run", "--dist=k1"], "--dist (k1,k2,p1,p2,k3) needs 5 finite comma-separated numbers, got 'k1'"),
 ])
 def test_numbers_that_are_not_finite_are_named_before_anything_runs(small_clip, tmp_path, command, needle, capsys):
     """``nan`` and ``inf`` parse as floats; a lens coefficient or an image point that is one used to
