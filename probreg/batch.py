@@ -13,8 +13,12 @@ Fault isolation
 Resumable
     Each result folder holds ``batch.json`` with a hash of the clip's inputs (clip description,
     keypoints, frames or video: names, sizes, modification times; the pose model), the options
-    and probreg's version.  A rerun skips clips whose result matches and leaves them byte for byte
-    as they were; a batch killed at any moment and run again ends complete.  ``summary.csv`` is
+    and the software (probreg, Python, numpy, SciPy, OpenCV, emcee, filterpy, ArviZ, onnxruntime:
+    :func:`probreg.io.software_versions`).  A rerun skips clips whose result matches and leaves them
+    byte for byte as they were; a batch killed at any moment and run again ends complete.  After an
+    upgrade of any of those the clips run again (the log says which versions changed): a study's
+    results never mix versions unnoticed, and a batch refuses to start on workers whose software
+    differs from its own (:class:`BatchSetupError`; ``run.json``'s ``"software"`` names each result's).  ``summary.csv`` is
     rebuilt from the result folders at the end of every run (written to a temporary file and
     renamed), so it never holds duplicate rows.
 Where it runs
@@ -43,8 +47,14 @@ import numpy as np
 
 from .io.clip import ClipFormatError
 from .io.output import MARKER, OutputRefused
+from .io.provenance import software_versions
 
-__all__ = ["MANIFEST_COLUMNS", "SUMMARY_COLUMNS", "BatchEntry", "read_manifest", "run_batch", "entry_hash"]
+__all__ = ["MANIFEST_COLUMNS", "SUMMARY_COLUMNS", "BatchEntry", "BatchSetupError", "read_manifest", "run_batch",
+           "entry_hash"]
+
+
+class BatchSetupError(RuntimeError):
+    """The batch cannot start: Dask is not installed, or the workers' software differs from the batch's."""
 
 #: optional manifest columns -> the ``probreg run`` option they override (and its type)
 MANIFEST_COLUMNS = {
@@ -199,12 +209,11 @@ def _fingerprint(path):
     return [(p.name, None, None)]
 
 
-def entry_hash(entry: BatchEntry):
-    """Hash of what a clip's result depends on: its inputs, its options and probreg's version."""
-    from . import __version__
-
+def entry_hash(entry: BatchEntry, software=None):
+    """Hash of what a clip's result depends on: its inputs, its options and the software that
+    computes it (``software``: :func:`probreg.io.software_versions`, read when not given)."""
     h = hashlib.sha256()
-    doc = {"version": __version__, "clip": str(entry.clip), "options": entry.options,
+    doc = {"software": software or software_versions(), "clip": str(entry.clip), "options": entry.options,
            "inputs": _fingerprint(entry.clip),
            "model": _fingerprint(entry.options["model"]) if entry.options.get("model") else None,
            "det_model": _fingerprint(entry.options["det_model"]) if entry.options.get("det_model") else None}
@@ -250,8 +259,8 @@ def run_entry(entry: BatchEntry, out_dir, digest):
         athlete = [float(v) for v in str(o["athlete"]).split(",")] if o.get("athlete") else None
         with tempfile.TemporaryDirectory(prefix="probreg-batch-") as scratch, threadpool_limits(limits=1):
             stamp = Path(scratch) / "batch.json"
-            stamp.write_text(json.dumps({"hash": digest, "clip": str(entry.clip), "row": entry.row,
-                                         "options": o}, indent=1, default=str) + "\n")
+            stamp.write_text(json.dumps({"hash": digest, "clip": str(entry.clip), "row": entry.row, "options": o,
+                                         "software": software_versions()}, indent=1, default=str) + "\n")
             run_source(entry.clip, target, _run_options(o), model=o.get("model"), det_model=o.get("det_model"),
                        athlete=athlete, fps=o.get("fps"), log=lambda *a: None, extra_files={"batch.json": stamp})
         row = _row_from_result(entry, target)
@@ -312,14 +321,47 @@ def _row_from_result(entry: BatchEntry, target):
     return row
 
 
-def _finished(entry, out_dir, digest):
-    """Whether ``DIR/<name>`` is a complete result of exactly this entry."""
+def _finished(entry, out_dir, digest, changed=None):
+    """Whether ``DIR/<name>`` is a complete result of exactly this entry.  A complete result of other
+    software adds the versions that differ to ``changed`` (a set of ``"name old -> new"``)."""
     target = Path(out_dir) / entry.name
     try:
         doc = json.loads((target / "batch.json").read_text())
     except (OSError, ValueError):
         return False
-    return doc.get("hash") == digest and (target / MARKER).is_file() and (target / "run.json").is_file()
+    complete = (target / MARKER).is_file() and (target / "run.json").is_file()
+    if complete and doc.get("hash") != digest and changed is not None and isinstance(doc.get("software"), dict):
+        changed.update(software_changes(doc["software"], software_versions()))
+    return doc.get("hash") == digest and complete
+
+
+def software_changes(old, new):
+    """``["numpy 2.4.5 -> 2.4.6", ...]``: the versions that differ between two
+    :func:`probreg.io.software_versions` records.
+
+    >>> software_changes({"numpy": "2.4.5", "scipy": "1.17.1"}, {"numpy": "2.4.6", "scipy": "1.17.1"})
+    ['numpy 2.4.5 -> 2.4.6']
+    """
+    return [f"{k} {old.get(k)} -> {new.get(k)}" for k in sorted(set(old) | set(new)) if old.get(k) != new.get(k)]
+
+
+def check_workers_software(client, software):
+    """Raise :class:`BatchSetupError` when a worker of ``client`` runs other software than
+    ``software`` (what the batch's hashes were made with): its results would carry versions the
+    resume check never sees."""
+    try:
+        from .io import provenance
+
+        found = client.run(provenance.software_versions)  # the workers' own, whatever this process reads
+    except Exception as exc:  # noqa: BLE001 -- e.g. a worker that cannot import probreg
+        raise BatchSetupError(f"cannot read the Dask workers' software versions ({type(exc).__name__}: {exc}); "
+                              f"every worker needs probreg installed") from None
+    bad = {w: software_changes(software, v) for w, v in found.items() if v != software}
+    if bad:
+        lines = "; ".join(f"{w}: {', '.join(c)}" for w, c in sorted(bad.items()))
+        raise BatchSetupError(f"the Dask workers run other software than this batch (this process -> worker): "
+                              f"{lines}. Install the same versions on every worker and here, so that the "
+                              f"results of a study do not mix versions")
 
 
 def _prepare_batch_dir(out_dir):
@@ -359,7 +401,7 @@ def _dask():
         import dask  # noqa: F401
         from distributed import Client, LocalCluster, as_completed
     except ImportError:
-        raise RuntimeError("probreg batch runs on Dask distributed, which is not installed: "
+        raise BatchSetupError("probreg batch runs on Dask distributed, which is not installed: "
                            "pip install 'probreg[dask]'") from None
     return Client, LocalCluster, as_completed
 
@@ -380,17 +422,19 @@ def run_batch(manifest, out_dir, base_options=None, workers=None, scheduler=None
         if e.clip == out_dir or out_dir in e.clip.parents or e.clip in out_dir.parents:
             raise ValueError(f"{out_dir}: the batch folder may not be, contain or lie in the input {e.clip}")
     _prepare_batch_dir(out_dir)
-    digests = {e.name: entry_hash(e) for e in entries}
-    rows = {}
-    todo = []
+    software = software_versions()
+    digests = {e.name: entry_hash(e, software) for e in entries}
+    rows, todo, changed = {}, [], set()
     for e in entries:
-        if _finished(e, out_dir, digests[e.name]):
+        if _finished(e, out_dir, digests[e.name], changed):
             row = _row_from_result(e, out_dir / e.name)
             row["skipped"] = "yes"
             rows[e.name] = row
         else:
             todo.append(e)
     log(f"batch: {len(entries)} clips, {len(entries) - len(todo)} already done, {len(todo)} to run")
+    if changed:
+        log(f"batch: results of other software run again ({', '.join(sorted(changed))})")
     if todo:
         cluster = None
         if scheduler:
@@ -401,6 +445,7 @@ def run_batch(manifest, out_dir, base_options=None, workers=None, scheduler=None
                                    silence_logs=40)
             client = Client(cluster)
         try:
+            check_workers_software(client, software)
             link = getattr(client, "dashboard_link", None)
             if link:
                 log(f"batch: Dask dashboard at {link}")

@@ -358,7 +358,7 @@ def _cmd_opensim(args):
 
 
 def _cmd_batch(args):
-    from .batch import DEFAULTS, run_batch
+    from .batch import DEFAULTS, BatchSetupError, run_batch
 
     base = {k: getattr(args, k) for k in DEFAULTS if hasattr(args, k)}  # entries default to every option given
     base["model"] = str(args.model.resolve()) if args.model else None
@@ -367,10 +367,8 @@ def _cmd_batch(args):
     try:
         rows = run_batch(args.manifest, args.out, base, workers=args.workers, scheduler=args.scheduler,
                          retries=args.retries, progress=not args.quiet, log=_log(args))
-    except RuntimeError as exc:
-        if "not installed" in str(exc):
-            raise CliError(str(exc)) from None
-        raise
+    except BatchSetupError as exc:  # Dask not installed, workers with other software
+        raise CliError(str(exc)) from None
     bad = [r for r in rows if r["status"] != "ok"]
     if bad:
         print(f"probreg batch: warning: {sum(r['status'] == 'failed' for r in rows)} failed, "

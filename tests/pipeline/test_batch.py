@@ -99,6 +99,55 @@ def test_batch_flags_reach_every_entry(tmp_path, monkeypatch):
     assert seen["slow_motion"] == 3.0
 
 
+def test_the_resume_hash_holds_the_software_and_names_what_changed(tmp_path):
+    """A result made with other software (an upgraded numpy, OpenCV, probreg, ...) is not skipped on
+    a rerun: its numbers could differ (0.2.0.dev38: OpenCV 5 moved a camera height by 1.5 points)."""
+    from probreg.batch import _finished, entry_hash
+    from probreg.io import software_versions
+    from probreg.io.output import MARKER
+
+    m = tmp_path / "m.csv"
+    m.write_text("clip\nheat1\n")
+    entry = read_manifest(m)[0]
+    now = software_versions()
+    older = {**now, "numpy": "1.26.4", "opencv": "4.9.0"}
+    assert entry_hash(entry) == entry_hash(entry, now)  # read from the installation when not given
+    assert entry_hash(entry, older) != entry_hash(entry, now)
+    assert entry_hash(entry, {**now, "probreg": "0.0.1"}) != entry_hash(entry, now)
+    # a finished result of the older software: rerun, and the versions that changed are named
+    target = tmp_path / "out" / "heat1"
+    target.mkdir(parents=True)
+    (target / MARKER).write_text("{}")
+    (target / "run.json").write_text("{}")
+    (target / "batch.json").write_text(json.dumps({"hash": entry_hash(entry, older), "software": older}))
+    changed = set()
+    assert not _finished(entry, tmp_path / "out", entry_hash(entry, now), changed)
+    assert changed == {f"numpy 1.26.4 -> {now['numpy']}", f"opencv 4.9.0 -> {now['opencv']}"}
+    (target / "batch.json").write_text(json.dumps({"hash": entry_hash(entry, now), "software": now}))
+    changed.clear()
+    assert _finished(entry, tmp_path / "out", entry_hash(entry, now), changed) and not changed
+
+
+def test_workers_with_other_software_are_refused_by_name():
+    from probreg.batch import BatchSetupError, check_workers_software
+    from probreg.io import software_versions
+
+    now = software_versions()
+
+    class FakeClient:  # Client.run: {worker address: the function's result there}
+        def __init__(self, found):
+            self.found = found
+
+        def run(self, fn):
+            assert fn is software_versions
+            return self.found
+
+    check_workers_software(FakeClient({"tcp://a:1": dict(now), "tcp://b:2": dict(now)}), now)  # all alike
+    with pytest.raises(BatchSetupError) as exc:
+        check_workers_software(FakeClient({"tcp://a:1": dict(now), "tcp://b:2": {**now, "scipy": "1.11.0"}}), now)
+    assert f"tcp://b:2: scipy {now['scipy']} -> 1.11.0" in str(exc.value) and "tcp://a:1" not in str(exc.value)
+
+
 # ----------------------------------------------------------------------------- on a LocalCluster
 pytest.importorskip("distributed")
 
@@ -114,7 +163,7 @@ def season(small_clip, tmp_path_factory):
 
 
 @pytest.mark.slow
-def test_batch_isolates_a_broken_clip_resumes_and_equals_single_runs(season, tmp_path):
+def test_batch_isolates_a_broken_clip_resumes_and_equals_single_runs(season, tmp_path, capsys):
     m = _manifest(season / "m.csv", [f"heat1,{FAST}", "broken,,,", f"heat2,{FAST}"])
     out = tmp_path / "batch"
     assert main(["batch", str(m), "--out", str(out), "--workers", "2", "--quiet"]) == 3  # one failed
@@ -145,6 +194,18 @@ def test_batch_isolates_a_broken_clip_resumes_and_equals_single_runs(season, tmp
     assert main(["batch", str(m), "--out", str(out), "--workers", "2", "--quiet"]) == 3
     rows3 = _summary(out)
     assert rows3[0]["skipped"] == "yes" and rows3[2]["skipped"] == "no"
+    # a batch whose software differs from its workers' refuses to start and touches nothing
+    import probreg.batch as batch
+
+    before = {p: p.read_bytes() for p in (out / "heat1").iterdir()}
+    real = batch.software_versions
+    batch.software_versions = lambda: {**real(), "numpy": "0.0.0"}
+    try:
+        assert main(["batch", str(m), "--out", str(out), "--workers", "1", "--quiet"]) == 2
+    finally:
+        batch.software_versions = real
+    assert "numpy 0.0.0 -> " in capsys.readouterr().err
+    assert {p: p.read_bytes() for p in (out / "heat1").iterdir()} == before
 
 
 @pytest.mark.slow
