@@ -83,13 +83,14 @@ def laplace_log_evidence(model, seed=0, n_walkers=24, burn_in=200, steps=400):
     """
     import emcee
 
-    from .sampling import SamplerSettings
+    from .sampling import Interruptible, SamplerSettings
 
     D = len(model.param_names)
     rng = np.random.default_rng(seed)
     n_walkers = max(int(n_walkers), 2 * D)
     p0 = model.initial_walkers(n_walkers, rng)
-    sampler = emcee.EnsembleSampler(n_walkers, D, model.log_prob, vectorize=True,
+    log_prob = Interruptible(model.log_prob)  # a Ctrl-C without emcee's screenful of walkers
+    sampler = emcee.EnsembleSampler(n_walkers, D, log_prob, vectorize=True,
                                     moves=SamplerSettings(moves="de").emcee_moves())
     sampler.random_state = np.random.RandomState(seed).get_state()
     with warnings.catch_warnings():
@@ -97,8 +98,10 @@ def laplace_log_evidence(model, seed=0, n_walkers=24, burn_in=200, steps=400):
         # acceptance test then subtracts infinities (the walker stays; its draws are dropped below)
         warnings.simplefilter("ignore", RuntimeWarning)
         state = sampler.run_mcmc(p0, burn_in, progress=False, skip_initial_state_check=True)
+        log_prob.check()
         sampler.reset()
         sampler.run_mcmc(state, steps, progress=False, skip_initial_state_check=True)
+        log_prob.check()
     draws = sampler.get_chain().reshape(-1, D)
     lp = sampler.get_log_prob().ravel()
     ok = np.isfinite(lp)

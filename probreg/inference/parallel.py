@@ -33,6 +33,14 @@ def _can_fork():
     return "fork" in mp.get_all_start_methods()
 
 
+def _ignore_interrupt():
+    """A pool worker leaves a Ctrl-C to its parent, which stops the pool (the ``with`` block
+    terminates it): without this every worker printed its own ``Process ForkPoolWorker-N``."""
+    import signal
+
+    signal.signal(signal.SIGINT, signal.SIG_IGN)
+
+
 def _forked_chunk(indices):
     from threadpoolctl import threadpool_limits
 
@@ -56,7 +64,7 @@ def fork_map(func, chunks, workers=None, done=None):
     if workers > 1 and _can_fork():
         _FORKED = func
         try:
-            with mp.get_context("fork").Pool(workers) as pool:
+            with mp.get_context("fork").Pool(workers, initializer=_ignore_interrupt) as pool:
                 out = []
                 for chunk, res in zip(chunks, pool.imap(_forked_chunk, chunks)):
                     out.append(res)

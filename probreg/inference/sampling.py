@@ -20,10 +20,49 @@ import numpy as np
 
 from .priors import SEGMENT_PROPORTIONS
 
-__all__ = ["SamplerSettings", "EmceeSampling", "MOVES"]
+__all__ = ["SamplerSettings", "EmceeSampling", "MOVES", "Interruptible"]
 
 #: the move mixtures ``SamplerSettings.moves`` names
 MOVES = ("de", "stretch")
+
+
+class Interruptible:
+    """A log probability for emcee that a Ctrl-C leaves quietly.
+
+    emcee wraps the function and, for any exception raised inside it (``KeyboardInterrupt``
+    too), prints every walker's parameters and a traceback before passing it on: a user who
+    stops a run saw a screenful of numbers.  Here an interrupt inside ``fn`` sets
+    :attr:`interrupted` and every call from then on returns ``-inf`` at once (the steps left in
+    emcee's current call reject every proposal in microseconds); :meth:`check`, called after each
+    ``run_mcmc``, raises the ``KeyboardInterrupt`` outside emcee.
+
+    >>> def lp(theta):
+    ...     raise KeyboardInterrupt
+    >>> f = Interruptible(lp)
+    >>> f(np.zeros((3, 2))).tolist(), f.interrupted
+    ([-inf, -inf, -inf], True)
+    >>> try:
+    ...     f.check()
+    ... except KeyboardInterrupt:
+    ...     print("raised here, outside emcee")
+    raised here, outside emcee
+    """
+
+    def __init__(self, fn):
+        self.fn = fn
+        self.interrupted = False
+
+    def __call__(self, theta):
+        if not self.interrupted:
+            try:
+                return self.fn(theta)
+            except KeyboardInterrupt:
+                self.interrupted = True
+        return np.full(np.atleast_2d(theta).shape[0], -np.inf)
+
+    def check(self):
+        if self.interrupted:
+            raise KeyboardInterrupt
 
 
 @dataclass(frozen=True)
@@ -112,13 +151,15 @@ class EmceeSampling:
             raise ValueError(f"the sampler needs at least {2 * D} walkers for {D} parameters, "
                              f"got {settings.n_walkers}")
         p0 = self.initial_walkers(settings.n_walkers, rng)
-        sampler = emcee.EnsembleSampler(settings.n_walkers, D, self.log_prob, vectorize=True,
+        log_prob = Interruptible(self.log_prob)
+        sampler = emcee.EnsembleSampler(settings.n_walkers, D, log_prob, vectorize=True,
                                         moves=settings.emcee_moves())
         sampler.random_state = np.random.RandomState(settings.seed).get_state()  # reproducible moves
         t0 = time.perf_counter()
         total = settings.burn_in + settings.max_steps
         bar = progress("sampling", total) if progress is not None else None
         state = sampler.run_mcmc(p0, settings.burn_in, progress=False, skip_initial_state_check=True)
+        log_prob.check()
         if bar is not None:
             bar.update(settings.burn_in)
         sampler.reset()
@@ -126,6 +167,7 @@ class EmceeSampling:
         steps = 0
         while steps < settings.max_steps:
             state = sampler.run_mcmc(state, settings.chunk, progress=False, skip_initial_state_check=True)
+            log_prob.check()
             steps += settings.chunk
             if bar is not None:
                 bar.update(settings.chunk)

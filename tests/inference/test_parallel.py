@@ -63,3 +63,18 @@ def test_background_work_has_ended_when_its_block_ends_even_by_an_error(tmp_path
         with in_background(slow_write("after_error.txt")):
             raise KeyError("the block's")
     assert (tmp_path / "after_error.txt").read_text() == "done"
+
+
+def test_pool_workers_leave_a_ctrl_c_to_their_parent(monkeypatch):
+    """A terminal's Ctrl-C reaches the whole process group: the pool's workers ignore it (the
+    parent stops the pool), so they do not each print 'Process ForkPoolWorker-N:'."""
+    import signal
+
+    monkeypatch.delenv("PROBREG_WORKERS", raising=False)
+    from probreg.inference import parallel
+
+    if not parallel._can_fork():
+        pytest.skip("no fork on this platform")
+    here = signal.getsignal(signal.SIGINT)
+    out = parallel.fork_map(lambda chunk: signal.getsignal(signal.SIGINT) == signal.SIG_IGN, [[0], [1]], workers=2)
+    assert out == [True, True] and signal.getsignal(signal.SIGINT) == here  # this process keeps its handler

@@ -68,3 +68,40 @@ def test_an_empty_budget_is_a_clear_error(field):
     """``--draws 0`` once ran the whole sampler and then failed with "noise_copies is empty"."""
     with pytest.raises(ValueError, match=f"{field} must be at least 1"):
         SamplerSettings(**{field: 0})
+
+
+class _StoppedAfter(_Gaussian):
+    """The Gaussian, with a Ctrl-C arriving inside the log probability at its ``n``-th call."""
+
+    def __init__(self, n):
+        super().__init__()
+        self.calls, self.n = 0, n
+
+    def log_prob(self, p):
+        self.calls += 1
+        if self.calls == self.n:
+            raise KeyboardInterrupt
+        return super().log_prob(p)
+
+
+@pytest.mark.parametrize("n", [5, 600])  # in the burn-in, and in a later chunk
+def test_a_ctrl_c_inside_the_sampler_stops_it_without_emcees_dump(n, capsys):
+    """emcee prints every walker and a traceback for an exception inside the log probability;
+    a user who pressed Ctrl-C during `probreg run` saw that screenful (0.2.0.dev39)."""
+    model = _StoppedAfter(n)
+    with pytest.raises(KeyboardInterrupt):
+        model.sample(SamplerSettings(n_walkers=16, burn_in=200, chunk=250, max_steps=2000, seed=0))
+    out = capsys.readouterr()
+    assert "emcee" not in out.out + out.err and "params" not in out.out + out.err
+    # the interrupt ends the sampling within emcee's current call: no step evaluates the model again
+    assert model.calls == n
+
+
+def test_a_ctrl_c_inside_the_branch_evidence_stops_it_without_emcees_dump(capsys):
+    from probreg.inference.evidence import laplace_log_evidence
+
+    model = _StoppedAfter(50)
+    with pytest.raises(KeyboardInterrupt):
+        laplace_log_evidence(model, steps=400)
+    out = capsys.readouterr()
+    assert "emcee" not in out.out + out.err and model.calls == 50
