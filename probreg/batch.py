@@ -444,6 +444,7 @@ def run_batch(manifest, out_dir, base_options=None, workers=None, scheduler=None
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                                    silence_logs=40)
             client = Client(cluster)
+        bar = None
         try:
             check_workers_software(client, software)
             link = getattr(client, "dashboard_link", None)
@@ -451,7 +452,6 @@ def run_batch(manifest, out_dir, base_options=None, workers=None, scheduler=None
                 log(f"batch: Dask dashboard at {link}")
             futures = {client.submit(run_entry, e, str(out_dir), digests[e.name], retries=retries, pure=False,
                                      key=f"probreg-{e.name}-{digests[e.name][:10]}"): e for e in todo}
-            bar = None
             if progress:
                 import sys
 
@@ -471,6 +471,15 @@ def run_batch(manifest, out_dir, base_options=None, workers=None, scheduler=None
                 _write_summary(out_dir, [rows[x.name] for x in entries if x.name in rows])
             if bar is not None:
                 bar.close()
+        except KeyboardInterrupt:
+            # a terminal's Ctrl-C reaches the local workers too: their nannies' errors while the
+            # cluster closes are no news (the finished clips are complete, the rest run again)
+            import logging
+
+            logging.getLogger("distributed").setLevel(logging.CRITICAL)
+            if bar is not None:
+                bar.close()
+            raise
         finally:
             client.close()
             if cluster is not None:

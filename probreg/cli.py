@@ -632,8 +632,9 @@ def main(argv=None):
     try:
         return args.func(args)
     except KeyboardInterrupt:
-        print(f"probreg {args.command}: interrupted; nothing was written, and any earlier result in the "
-              f"output folder is left as it was", file=sys.stderr)
+        print(f"probreg {args.command}: interrupted; " + ("the clips that finished are kept; the same command again "
+              "runs the rest" if args.command == "batch" else "nothing was written, and any earlier result in the "
+              "output folder is left as it was"), file=sys.stderr)
         return 130
     except (CliError, ValueError, OSError, RuntimeError) as exc:
         # user-caused errors (bad input, missing files, refused output folders) are one line;

@@ -80,7 +80,7 @@ def test_bad_manifests_name_line_and_column(tmp_path, text, needle, capsys):
     assert needle in capsys.readouterr().err
 
 
-def test_batch_flags_reach_every_entry(tmp_path, monkeypatch):
+def test_batch_flags_reach_every_entry(tmp_path, monkeypatch, capsys):
     """Options given on the command line are the entries' defaults, none silently dropped."""
     import probreg.batch as batch
 
@@ -97,6 +97,9 @@ def test_batch_flags_reach_every_entry(tmp_path, monkeypatch):
                  "--camera-side", "far", "--slow-motion", "3"]) == 130
     assert seen["shot"] == "1" and seen["height_allowance"] == 0.01 and seen["camera_side"] == "far"
     assert seen["slow_motion"] == 3.0
+    # a Ctrl-C: the batch says what it keeps (finished clips) and how to go on, not "nothing was written"
+    assert "interrupted; the clips that finished are kept; the same command again runs the rest" in \
+        capsys.readouterr().err
 
 
 def test_the_resume_hash_holds_the_software_and_names_what_changed(tmp_path):
