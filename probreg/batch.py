@@ -18,7 +18,8 @@ Resumable
     byte for byte as they were; a batch killed at any moment and run again ends complete.  After an
     upgrade of any of those the clips run again (the log says which versions changed): a study's
     results never mix versions unnoticed, and a batch refuses to start on workers whose software
-    differs from its own (:class:`BatchSetupError`; ``run.json``'s ``"software"`` names each result's).  ``summary.csv`` is
+    differs from its own (:class:`BatchSetupError`; a worker that joins later fails its clips,
+    naming the versions; ``run.json``'s ``"software"`` names each result's).  ``summary.csv`` is
     rebuilt from the result folders at the end of every run (written to a temporary file and
     renamed), so it never holds duplicate rows.
 Where it runs
@@ -243,14 +244,22 @@ def _run_options(o):
                       shot=str(o["shot"]), slow_motion=float(o["slow_motion"]))
 
 
-def run_entry(entry: BatchEntry, out_dir, digest):
-    """Run one clip (in a worker): a summary row; never raises for a failing clip."""
+def run_entry(entry: BatchEntry, out_dir, digest, software=None):
+    """Run one clip (in a worker): a summary row; never raises for a failing clip.  With
+    ``software`` (the batch's :func:`probreg.io.software_versions`), a worker whose own versions
+    differ (one that joined the cluster after the batch's check) fails the clip, naming them."""
     from threadpoolctl import threadpool_limits
 
     os.environ["PROBREG_WORKERS"] = "1"  # the worker is one core: no process pool inside it
     t0 = time.perf_counter()
     target = Path(out_dir) / entry.name
     try:
+        from .io import provenance
+
+        here = provenance.software_versions()
+        if software is not None and here != software:
+            raise BatchSetupError(f"this worker runs other software than the batch (batch -> worker): "
+                                  f"{', '.join(software_changes(software, here))}")
         import tempfile
 
         from .pipeline import run_source
@@ -450,8 +459,8 @@ def run_batch(manifest, out_dir, base_options=None, workers=None, scheduler=None
             link = getattr(client, "dashboard_link", None)
             if link:
                 log(f"batch: Dask dashboard at {link}")
-            futures = {client.submit(run_entry, e, str(out_dir), digests[e.name], retries=retries, pure=False,
-                                     key=f"probreg-{e.name}-{digests[e.name][:10]}"): e for e in todo}
+            futures = {client.submit(run_entry, e, str(out_dir), digests[e.name], software, retries=retries,
+                                     pure=False, key=f"probreg-{e.name}-{digests[e.name][:10]}"): e for e in todo}
             if progress:
                 import sys
 

@@ -151,6 +151,20 @@ def test_workers_with_other_software_are_refused_by_name():
     assert f"tcp://b:2: scipy {now['scipy']} -> 1.11.0" in str(exc.value) and "tcp://a:1" not in str(exc.value)
 
 
+def test_a_worker_that_joined_with_other_software_fails_its_clip_by_name(tmp_path):
+    """Workers checked at the start cannot cover one that joins later (an adaptive cluster): each
+    task compares its worker's versions with the batch's and fails its clip, naming them."""
+    from probreg.batch import entry_hash, run_entry
+    from probreg.io import software_versions
+
+    (tmp_path / "m.csv").write_text("clip\nheat1\n")
+    entry = read_manifest(tmp_path / "m.csv")[0]
+    batch_software = {**software_versions(), "emcee": "2.2.1"}
+    row = run_entry(entry, tmp_path / "out", entry_hash(entry, batch_software), batch_software)
+    assert row["status"] == "failed" and f"emcee 2.2.1 -> {software_versions()['emcee']}" in row["error"]
+    assert not (tmp_path / "out").exists()  # nothing written for it
+
+
 # ----------------------------------------------------------------------------- on a LocalCluster
 pytest.importorskip("distributed")
 
