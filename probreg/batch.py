@@ -330,9 +330,10 @@ def _row_from_result(entry: BatchEntry, target):
     return row
 
 
-def _finished(entry, out_dir, digest, changed=None):
+def _finished(entry, out_dir, digest, changed=None, software=None):
     """Whether ``DIR/<name>`` is a complete result of exactly this entry.  A complete result of other
-    software adds the versions that differ to ``changed`` (a set of ``"name old -> new"``)."""
+    software than ``software`` (default: this installation's) adds the versions that differ to
+    ``changed`` (a set of ``"name old -> new"``)."""
     target = Path(out_dir) / entry.name
     try:
         doc = json.loads((target / "batch.json").read_text())
@@ -340,7 +341,7 @@ def _finished(entry, out_dir, digest, changed=None):
         return False
     complete = (target / MARKER).is_file() and (target / "run.json").is_file()
     if complete and doc.get("hash") != digest and changed is not None and isinstance(doc.get("software"), dict):
-        changed.update(software_changes(doc["software"], software_versions()))
+        changed.update(software_changes(doc["software"], software or software_versions()))
     return doc.get("hash") == digest and complete
 
 
@@ -435,7 +436,7 @@ def run_batch(manifest, out_dir, base_options=None, workers=None, scheduler=None
     digests = {e.name: entry_hash(e, software) for e in entries}
     rows, todo, changed = {}, [], set()
     for e in entries:
-        if _finished(e, out_dir, digests[e.name], changed):
+        if _finished(e, out_dir, digests[e.name], changed, software):
             row = _row_from_result(e, out_dir / e.name)
             row["skipped"] = "yes"
             rows[e.name] = row
