@@ -272,7 +272,7 @@ def test_propagation_does_not_depend_on_the_number_of_workers(model, monkeypatch
     assert one["gait"].keys() == two["gait"].keys()
 
     class NoProcesses:
-        def Pool(self, n):
+        def Pool(self, n, **kwargs):  # as multiprocessing.Pool (initializer=...)
             raise OSError("no processes here")
 
     monkeypatch.setattr(multiprocessing, "get_context", lambda method: NoProcesses())
@@ -341,7 +341,7 @@ def test_with_a_known_lens_frames_are_judged_on_the_undistorted_families(tmp_pat
     import multiprocessing
 
     class NoProcesses:
-        def Pool(self, n):
+        def Pool(self, n, **kwargs):  # as multiprocessing.Pool (initializer=...)
             raise OSError("no processes here")
 
     with pytest.MonkeyPatch.context() as mp:
