@@ -34,8 +34,10 @@ def _can_fork():
 
 
 def _ignore_interrupt():
-    """A pool worker leaves a Ctrl-C to its parent, which stops the pool (the ``with`` block
-    terminates it): without this every worker printed its own ``Process ForkPoolWorker-N``."""
+    """A forked process leaves a Ctrl-C to its parent, which stops the pool (the ``with`` block
+    terminates it) or ends with it (:func:`fork_call`'s daemonic process): without this every pool
+    worker printed its own ``Process ForkPoolWorker-N``, and a :func:`fork_call` process
+    interrupted while it sent its result a traceback."""
     import signal
 
     signal.signal(signal.SIGINT, signal.SIG_IGN)
@@ -106,6 +108,7 @@ def fork_call(work):
     def child():
         from threadpoolctl import threadpool_limits
 
+        _ignore_interrupt()  # a Ctrl-C is the parent's to handle; this process ends with it (a daemon)
         try:
             with threadpool_limits(limits=1):
                 out = ("ok", work())

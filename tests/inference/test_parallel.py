@@ -78,3 +78,5 @@ def test_pool_workers_leave_a_ctrl_c_to_their_parent(monkeypatch):
     here = signal.getsignal(signal.SIGINT)
     out = parallel.fork_map(lambda chunk: signal.getsignal(signal.SIGINT) == signal.SIG_IGN, [[0], [1]], workers=2)
     assert out == [True, True] and signal.getsignal(signal.SIGINT) == here  # this process keeps its handler
+    # and fork_call's process likewise (interrupted while it sent its result, it printed a traceback)
+    assert parallel.fork_call(lambda: signal.getsignal(signal.SIGINT) == signal.SIG_IGN)() is True
