@@ -46,9 +46,10 @@ from pathlib import Path
 
 import numpy as np
 
+from .io import provenance
 from .io.clip import ClipFormatError
 from .io.output import MARKER, OutputRefused
-from .io.provenance import software_versions
+from .io.provenance import software_versions  # this process's versions (the workers read provenance's)
 
 __all__ = ["MANIFEST_COLUMNS", "SUMMARY_COLUMNS", "BatchEntry", "BatchSetupError", "read_manifest", "run_batch",
            "entry_hash"]
@@ -254,8 +255,6 @@ def run_entry(entry: BatchEntry, out_dir, digest, software=None):
     t0 = time.perf_counter()
     target = Path(out_dir) / entry.name
     try:
-        from .io import provenance
-
         here = provenance.software_versions()
         if software is not None and here != software:
             raise BatchSetupError(f"this worker runs other software than the batch (batch -> worker): "
@@ -269,7 +268,7 @@ def run_entry(entry: BatchEntry, out_dir, digest, software=None):
         with tempfile.TemporaryDirectory(prefix="probreg-batch-") as scratch, threadpool_limits(limits=1):
             stamp = Path(scratch) / "batch.json"
             stamp.write_text(json.dumps({"hash": digest, "clip": str(entry.clip), "row": entry.row, "options": o,
-                                         "software": software_versions()}, indent=1, default=str) + "\n")
+                                         "software": here}, indent=1, default=str) + "\n")
             run_source(entry.clip, target, _run_options(o), model=o.get("model"), det_model=o.get("det_model"),
                        athlete=athlete, fps=o.get("fps"), log=lambda *a: None, extra_files={"batch.json": stamp})
         row = _row_from_result(entry, target)
@@ -360,8 +359,6 @@ def check_workers_software(client, software):
     ``software`` (what the batch's hashes were made with): its results would carry versions the
     resume check never sees."""
     try:
-        from .io import provenance
-
         found = client.run(provenance.software_versions)  # the workers' own, whatever this process reads
     except Exception as exc:  # noqa: BLE001 -- e.g. a worker that cannot import probreg
         raise BatchSetupError(f"cannot read the Dask workers' software versions ({type(exc).__name__}: {exc}); "
@@ -416,6 +413,24 @@ def _dask():
     return Client, LocalCluster, as_completed
 
 
+def _close_cluster(client, cluster, quiet=False):
+    """Close the client and a local cluster.  ``quiet`` after a Ctrl-C: it reached the local
+    workers too, and their nannies' errors while the cluster closes are no news (the finished
+    clips are complete, the rest run again); Dask's log level is restored afterwards."""
+    import logging
+
+    logger = logging.getLogger("distributed")
+    level = logger.level
+    if quiet:
+        logger.setLevel(logging.CRITICAL)
+    try:
+        client.close()
+        if cluster is not None:
+            cluster.close()
+    finally:
+        logger.setLevel(level)
+
+
 def run_batch(manifest, out_dir, base_options=None, workers=None, scheduler=None, retries=2, progress=True,
               log=print):
     """Run every clip of ``manifest`` into ``out_dir`` (see the module docstring).
@@ -454,7 +469,7 @@ def run_batch(manifest, out_dir, base_options=None, workers=None, scheduler=None
             cluster = LocalCluster(n_workers=n, threads_per_worker=1, processes=True, dashboard_address=":0",
                                    silence_logs=40)
             client = Client(cluster)
-        bar = None
+        bar, interrupted = None, False
         try:
             check_workers_software(client, software)
             link = getattr(client, "dashboard_link", None)
@@ -482,18 +497,12 @@ def run_batch(manifest, out_dir, base_options=None, workers=None, scheduler=None
             if bar is not None:
                 bar.close()
         except KeyboardInterrupt:
-            # a terminal's Ctrl-C reaches the local workers too: their nannies' errors while the
-            # cluster closes are no news (the finished clips are complete, the rest run again)
-            import logging
-
-            logging.getLogger("distributed").setLevel(logging.CRITICAL)
+            interrupted = True
             if bar is not None:
                 bar.close()
             raise
         finally:
-            client.close()
-            if cluster is not None:
-                cluster.close()
+            _close_cluster(client, cluster, quiet=interrupted)
     ordered = [rows[e.name] for e in entries]
     _write_summary(out_dir, ordered)
     counts = {s: sum(r["status"] == s for r in ordered) for s in ("ok", "flagged", "failed")}

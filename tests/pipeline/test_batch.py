@@ -180,7 +180,7 @@ def season(small_clip, tmp_path_factory):
 
 
 @pytest.mark.slow
-def test_batch_isolates_a_broken_clip_resumes_and_equals_single_runs(season, tmp_path, capsys):
+def test_batch_isolates_a_broken_clip_resumes_and_equals_single_runs(season, tmp_path, capsys, monkeypatch):
     m = _manifest(season / "m.csv", [f"heat1,{FAST}", "broken,,,", f"heat2,{FAST}"])
     out = tmp_path / "batch"
     assert main(["batch", str(m), "--out", str(out), "--workers", "2", "--quiet"]) == 3  # one failed
@@ -216,11 +216,8 @@ def test_batch_isolates_a_broken_clip_resumes_and_equals_single_runs(season, tmp
 
     before = {p: p.read_bytes() for p in (out / "heat1").iterdir()}
     real = batch.software_versions
-    batch.software_versions = lambda: {**real(), "numpy": "0.0.0"}
-    try:
-        assert main(["batch", str(m), "--out", str(out), "--workers", "1", "--quiet"]) == 2
-    finally:
-        batch.software_versions = real
+    monkeypatch.setattr(batch, "software_versions", lambda: {**real(), "numpy": "0.0.0"})
+    assert main(["batch", str(m), "--out", str(out), "--workers", "1", "--quiet"]) == 2
     assert "numpy 0.0.0 -> " in capsys.readouterr().err
     assert {p: p.read_bytes() for p in (out / "heat1").iterdir()} == before
 
