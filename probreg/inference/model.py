@@ -548,11 +548,7 @@ class ClipModel(DrawPropagation, EmceeSampling):
             lens = lens[np.isfinite(lens) & (lens > 0)]  # joints at one point measure no length
             if len(lens) < 10:
                 continue
-            # the median: with the limbs in their planes and the noise symmetric it is the length itself
-            # (plus what the noise adds, removed below). The 60th percentile used until 0.2.0.dev40 lies
-            # a quarter of the spread above: at the true camera +1.3 % for the legs on tuning clips, the
-            # median -0.2 to -0.4 %; the CMU runs cast from the side, exact: legs +0.2-0.4 % (docs/method.md)
-            obs = float(np.median(lens))
+            obs = float(np.median(lens))  # unbiased, not a percentile (docs/method.md: "The limbs seen at a height")
             # remove the length that keypoint noise adds to a distance (2 joints, 2-D)
             obs = float(np.sqrt(max(obs**2 - 2 * sd_m**2, (0.5 * obs) ** 2)))
             mad = 1.4826 * np.median(np.abs(lens - np.median(lens)))
