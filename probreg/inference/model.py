@@ -548,14 +548,14 @@ class ClipModel(DrawPropagation, EmceeSampling):
             lens = lens[np.isfinite(lens) & (lens > 0)]  # joints at one point measure no length
             if len(lens) < 10:
                 continue
-            obs = float(np.median(lens))  # unbiased, not a percentile (docs/method.md: "The limbs seen at a height")
+            med = float(np.median(lens))  # unbiased, not a percentile (docs/method.md: "The limbs seen at a height")
             # remove the length that keypoint noise adds to a distance (2 joints, 2-D)
-            obs = float(np.sqrt(max(obs**2 - 2 * sd_m**2, (0.5 * obs) ** 2)))
-            mad = 1.4826 * np.median(np.abs(lens - np.median(lens)))
+            obs = float(np.sqrt(max(med**2 - 2 * sd_m**2, (0.5 * med) ** 2)))
+            mad = 1.4826 * np.median(np.abs(lens - med))
             n_eff = max(len(lens) / 10.0, 1.0)  # frames are strongly correlated
             self.seg_obs[s][g] = obs
             self.seg_se[s][g] = float(np.hypot(mad / np.sqrt(n_eff), 0.02 * obs))
-            self.seg_spread[s][g], self.seg_measured[s][g] = mad / max(float(np.median(lens)), 1e-9), len(lens)
+            self.seg_spread[s][g], self.seg_measured[s][g] = mad / max(med, 1e-9), len(lens)
 
     def _interp(self, arr, log_h):
         return np.interp(log_h, np.log(self.grid), arr, left=np.nan, right=np.nan)
