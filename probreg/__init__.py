@@ -6,7 +6,7 @@ The foundation modules are ``camera``, ``track``, ``skeleton``, ``runner``
 (gait model), ``render`` and ``synth`` (synthetic broadcast clips).
 """
 
-__version__ = "0.2.0.dev41"
+__version__ = "0.2.0.dev42"
 
 __all__ = ["Camera", "TrackGeometry", "STANDARD_TRACK", "JOINT_NAMES", "ANGLE_NAMES",
            "joint_angles", "__version__"]
